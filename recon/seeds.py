@@ -1,0 +1,172 @@
+"""The clinician's marks (seeds.json): read, validate, write.
+
+Format (version 1), pixel coordinates (col, row) 0-based as in the C-arm
+convention::
+
+    {"version": 1,
+     "segments": [{"name": "LAD mid", "a": [[c, r], ...], "b": [[c, r], ...]}],
+     "features": [{"name": "D1 bifurcation", "a": [c, r], "b": [c, r]}]}
+
+In each segment the first point is proximal, the last distal, the points
+between are waypoints; only the ends correspond between views.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+__all__ = ["Segment", "Feature", "Seeds", "SeedsError", "load_seeds", "save_seeds"]
+
+
+class SeedsError(ValueError):
+    """A seeds file or object that cannot be used; the message names what is wrong."""
+
+
+@dataclass(frozen=True)
+class Segment:
+    """One vessel segment: clicks (K, 2) in view A and (L, 2) in view B, proximal first."""
+
+    name: str
+    a_px: tuple[tuple[float, float], ...]
+    b_px: tuple[tuple[float, float], ...]
+
+    @property
+    def a(self) -> NDArray[np.float64]:
+        return np.asarray(self.a_px, dtype=float).reshape(-1, 2)
+
+    @property
+    def b(self) -> NDArray[np.float64]:
+        return np.asarray(self.b_px, dtype=float).reshape(-1, 2)
+
+
+@dataclass(frozen=True)
+class Feature:
+    """A landmark seen in both views: (col, row) in A and in B."""
+
+    name: str
+    a_px: tuple[float, float]
+    b_px: tuple[float, float]
+
+
+@dataclass(frozen=True)
+class Seeds:
+    segments: tuple[Segment, ...] = field(default_factory=tuple)
+    features: tuple[Feature, ...] = field(default_factory=tuple)
+
+    def to_dict(self) -> dict:
+        return {
+            "version": 1,
+            "segments": [
+                {"name": s.name, "a": [list(p) for p in s.a_px], "b": [list(p) for p in s.b_px]}
+                for s in self.segments
+            ],
+            "features": [
+                {"name": f.name, "a": list(f.a_px), "b": list(f.b_px)} for f in self.features
+            ],
+        }
+
+    def correspondences(self) -> tuple[NDArray[np.float64], NDArray[np.float64], list[str]]:
+        """Corresponding points of both views: segment ends then features.
+
+        Returns points_a_px (K, 2), points_b_px (K, 2) and their names.
+        """
+        pa: list[tuple[float, float]] = []
+        pb: list[tuple[float, float]] = []
+        names: list[str] = []
+        for s in self.segments:
+            pa += [s.a_px[0], s.a_px[-1]]
+            pb += [s.b_px[0], s.b_px[-1]]
+            names += [f"{s.name} proximal", f"{s.name} distal"]
+        for f in self.features:
+            pa.append(f.a_px)
+            pb.append(f.b_px)
+            names.append(f.name)
+        return np.asarray(pa, float).reshape(-1, 2), np.asarray(pb, float).reshape(-1, 2), names
+
+
+def _point(value: object, where: str) -> tuple[float, float]:
+    if (
+        not isinstance(value, (list, tuple))
+        or len(value) != 2
+        or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in value)
+        or not all(math.isfinite(float(x)) for x in value)
+    ):
+        raise SeedsError(f"{where}: expected a point [col, row] of two numbers, got {value!r}")
+    return (float(value[0]), float(value[1]))
+
+
+def seeds_from_dict(data: object, source: str = "seeds") -> Seeds:
+    """Validate a parsed seeds document; errors name ``source`` and the bad entry."""
+    if not isinstance(data, dict):
+        raise SeedsError(f"{source}: the top level must be a JSON object")
+    version = data.get("version", 1)
+    if version != 1:
+        raise SeedsError(f"{source}: unsupported version {version!r} (this program reads 1)")
+    segments = []
+    for k, s in enumerate(data.get("segments", []) or []):
+        where = f"{source}: segments[{k}]"
+        if not isinstance(s, dict):
+            raise SeedsError(f"{where} must be an object")
+        name = str(s.get("name", f"segment {k + 1}"))
+        views = {}
+        for key in ("a", "b"):
+            pts = s.get(key)
+            if not isinstance(pts, list) or len(pts) < 2:
+                raise SeedsError(
+                    f"{where} ({name}): '{key}' needs at least two points (proximal and distal)"
+                )
+            views[key] = tuple(_point(p, f"{where}.{key}[{i}]") for i, p in enumerate(pts))
+        segments.append(Segment(name=name, a_px=views["a"], b_px=views["b"]))
+    features = []
+    for k, f in enumerate(data.get("features", []) or []):
+        where = f"{source}: features[{k}]"
+        if not isinstance(f, dict) or "a" not in f or "b" not in f:
+            raise SeedsError(f"{where} must be an object with points 'a' and 'b'")
+        features.append(
+            Feature(
+                name=str(f.get("name", f"feature {k + 1}")),
+                a_px=_point(f["a"], f"{where}.a"),
+                b_px=_point(f["b"], f"{where}.b"),
+            )
+        )
+    return Seeds(segments=tuple(segments), features=tuple(features))
+
+
+def load_seeds(path: str | os.PathLike) -> Seeds:
+    """Read and validate a seeds.json file. Raises SeedsError naming the file."""
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise SeedsError(f"{p}: cannot read ({exc.strerror or exc})") from None
+    try:
+        data = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise SeedsError(f"{p}: not valid JSON (line {exc.lineno}: {exc.msg})") from None
+    return seeds_from_dict(data, source=str(p))
+
+
+def save_seeds(seeds: Seeds, path: str | os.PathLike) -> None:
+    """Write seeds atomically (temporary file in the same folder, then rename)."""
+    atomic_write_bytes(Path(path), (json.dumps(seeds.to_dict(), indent=2) + "\n").encode())
+
+
+def atomic_write_bytes(path: Path, data: bytes) -> None:
+    """Write ``data`` to ``path`` through a temporary file and an atomic rename."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(data)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise

@@ -1,0 +1,156 @@
+"""Small frozen dataclasses that pass between pipeline stages.
+
+Each stage module owns its own result types; the ones here cross stage
+boundaries (traced 2D centerline -> matching -> 3D centerline -> surface).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.interpolate import make_interp_spline
+
+FloatArray = NDArray[np.float64]
+
+__all__ = ["Centerline2D", "Matching", "Centerline3D"]
+
+
+def _arclength(points: FloatArray) -> FloatArray:
+    steps = np.linalg.norm(np.diff(points, axis=0), axis=1)
+    return np.concatenate([[0.0], np.cumsum(steps)])
+
+
+@dataclass(frozen=True, eq=False)
+class Centerline2D:
+    """A vessel centerline traced in one view, proximal to distal.
+
+    Attributes
+    ----------
+    points_px : (N, 2) subpixel (col, row), roughly uniform arc-length spacing.
+    radius_px : (N,) lumen radius in pixels (half the projected diameter).
+    brightness : (N,) image value on the centerline (raw units; lower = more
+        contrast for MONOCHROME2), used by CBOCD eq. (7).
+    clicks_px : (K, 2) the snapped clicks the trace passes through.
+    """
+
+    points_px: FloatArray
+    radius_px: FloatArray
+    brightness: FloatArray
+    clicks_px: FloatArray = field(default_factory=lambda: np.zeros((0, 2)))
+
+    def __post_init__(self) -> None:
+        n = len(self.points_px)
+        if self.points_px.shape != (n, 2) or n < 2:
+            raise ValueError(f"points_px must be (N>=2, 2), got {self.points_px.shape}")
+        for name in ("radius_px", "brightness"):
+            if getattr(self, name).shape != (n,):
+                raise ValueError(f"{name} must be ({n},), got {getattr(self, name).shape}")
+
+    @property
+    def arclength_px(self) -> FloatArray:
+        """Cumulative arc length (N,) in pixels from the proximal end."""
+        return _arclength(self.points_px)
+
+    @property
+    def length_px(self) -> float:
+        return float(self.arclength_px[-1])
+
+    @property
+    def tangents(self) -> FloatArray:
+        """Unit tangents (N, 2) by central differences."""
+        t = np.gradient(self.points_px, axis=0)
+        return t / np.maximum(np.linalg.norm(t, axis=1, keepdims=True), 1e-12)
+
+    @property
+    def normals(self) -> FloatArray:
+        """Unit normals (N, 2): tangents turned by +90 degrees in (col, row)."""
+        t = self.tangents
+        return np.column_stack([-t[:, 1], t[:, 0]])
+
+    def resample(self, n: int) -> Centerline2D:
+        """The same curve at ``n`` points of uniform arc length (cubic spline, sec. 3.3.1)."""
+        if n < 2:
+            raise ValueError("n must be at least 2")
+        s = self.arclength_px
+        keep = np.concatenate([[True], np.diff(s) > 1e-9])
+        s, pts = s[keep], self.points_px[keep]
+        k = min(3, len(s) - 1)
+        s_new = np.linspace(0.0, s[-1], n)
+        pts_new = make_interp_spline(s, pts, k=k)(s_new)
+        return Centerline2D(
+            points_px=pts_new,
+            radius_px=np.interp(s_new, s, self.radius_px[keep]),
+            brightness=np.interp(s_new, s, self.brightness[keep]),
+            clicks_px=self.clicks_px,
+        )
+
+
+@dataclass(frozen=True, eq=False)
+class Matching:
+    """Point correspondence between the two traced centerlines.
+
+    Attributes
+    ----------
+    method : "match1" .. "match4".
+    points_a_px, points_b_px : (M, 2) matched pixels, proximal to distal.
+    index_a, index_b : (M,) indices into the (possibly resampled) centerlines
+        ``centerline_a`` / ``centerline_b`` used for matching.
+    centerline_a, centerline_b : the centerlines indexed by index_a/index_b.
+    standard_view : "a" or "b", the longer trace (sec. 3.3.1).
+    deviation_a_px, deviation_b_px : (K, 2) deviation pairs (sec. 3.4.2)
+        whose epipolar distance exceeded the threshold.
+    max_row_min_cost_px : MAX of the row minima of COST (sec. 3.4.2).
+    threshold_px : STD, the deviation threshold used.
+    elapsed_ms : time of the matching.
+    """
+
+    method: str
+    points_a_px: FloatArray
+    points_b_px: FloatArray
+    index_a: NDArray[np.int64]
+    index_b: NDArray[np.int64]
+    centerline_a: Centerline2D
+    centerline_b: Centerline2D
+    standard_view: str
+    deviation_a_px: FloatArray = field(default_factory=lambda: np.zeros((0, 2)))
+    deviation_b_px: FloatArray = field(default_factory=lambda: np.zeros((0, 2)))
+    max_row_min_cost_px: float = 0.0
+    threshold_px: float = 0.0
+    elapsed_ms: float = 0.0
+
+
+@dataclass(frozen=True, eq=False)
+class Centerline3D:
+    """The reconstructed 3D centerline in view A's world frame (mm), proximal to distal.
+
+    Attributes
+    ----------
+    X_world : (M, 3) points of the smoothing spline at uniform arc length.
+    s_mm : (M,) arc length from the proximal end.
+    tangents : (M, 3) unit tangents of the spline.
+    radius_a_mm, radius_b_mm : (M,) lumen radius seen in view A / view B,
+        scaled back to the vessel by eq. (11) (half the intersection-line
+        lengths of sec. 3.5).
+    X_raw_world : (K, 3) the triangulated matched points before smoothing.
+    points_a_px, points_b_px : (K, 2) the matched pixels behind X_raw_world.
+    """
+
+    X_world: FloatArray
+    s_mm: FloatArray
+    tangents: FloatArray
+    radius_a_mm: FloatArray
+    radius_b_mm: FloatArray
+    X_raw_world: FloatArray
+    points_a_px: FloatArray
+    points_b_px: FloatArray
+
+    @property
+    def length_mm(self) -> float:
+        return float(self.s_mm[-1])
+
+    @property
+    def radius_mm(self) -> FloatArray:
+        """Equivalent circular radius (M,) = sqrt(r_a r_b) (same area as the ellipse)."""
+        return np.sqrt(self.radius_a_mm * self.radius_b_mm)
