@@ -1,0 +1,345 @@
+"""The `coronary3d` command line: info, phantom, reconstruct, view, bench.
+
+Every user mistake (a bad file, a missing tag, a click off the vessel) ends
+in one line on stderr naming the file or click and what is wrong, and exit
+code 2. Set CORONARY3D_DEBUG=1 to see the traceback instead.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+
+EXIT_USER_ERROR = 2
+
+DEMO_DIR = Path(__file__).resolve().parent.parent / "assets" / "demo"
+
+BENCHES = ("centerline", "calibration", "matching", "reconstruct")
+
+
+def _user_error_types() -> tuple[type[BaseException], ...]:
+    """The project's user-facing error classes (imported lazily: start-up stays fast)."""
+    from recon.seeds import SeedsError
+
+    types: list[type[BaseException]] = [SeedsError]
+    for module, name in (
+        ("recon.dicom_io", "LoadError"),
+        ("recon.centerline", "TraceError"),
+        ("recon.calibration", "CalibrationError"),
+        ("recon.pipeline", "PipelineError"),
+    ):
+        try:
+            mod = __import__(module, fromlist=[name])
+            types.append(getattr(mod, name))
+        except (ImportError, AttributeError):
+            pass
+    return tuple(types)
+
+
+def _add_geometry_options(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group(
+        "geometry overrides (for files that lack the tags; apply to every file given)"
+    )
+    g.add_argument("--sid-mm", type=float, help="source to detector distance, mm")
+    g.add_argument("--sod-mm", type=float, help="source to isocenter distance, mm")
+    g.add_argument(
+        "--pixel-spacing-mm", type=float, help="detector pixel size, mm (square pixels)"
+    )
+    g.add_argument(
+        "--geometry-json",
+        metavar="FILE",
+        help="JSON with any of alpha_deg, beta_deg, sid_mm, sod_mm, pixel_spacing_mm",
+    )
+
+
+def _overrides(args: argparse.Namespace, which: str = ""):
+    """GeometryOverrides from the command-line options (None when none given)."""
+    from recon.dicom_io import GeometryOverrides
+
+    json_path = getattr(args, f"geometry_json{which}", None) or getattr(args, "geometry_json", None)
+    base = GeometryOverrides.from_json(json_path) if json_path else GeometryOverrides()
+    spacing = getattr(args, "pixel_spacing_mm", None)
+    values = {
+        "sid_mm": getattr(args, "sid_mm", None),
+        "sod_mm": getattr(args, "sod_mm", None),
+        "pixel_spacing_mm": (spacing, spacing) if spacing else None,
+    }
+    changes = {k: v for k, v in values.items() if v is not None}
+    if not changes and not json_path:
+        return None
+    from dataclasses import replace
+
+    return replace(base, **changes)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="coronary3d",
+        description=(
+            "3D coronary artery reconstruction from two X-ray angiograms: C-arm geometry "
+            "from the DICOM header, PALM calibration, CBOCD point matching, a watertight "
+            "surface mesh and 3D stenosis measurements."
+        ),
+        epilog="Start with: coronary3d reconstruct --demo --out out/demo",
+    )
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+
+    p = sub.add_parser(
+        "info",
+        help="describe XA DICOM files: geometry tags, frames, chosen frame",
+        description="Print, per file, the SOP class, size, frames, frame time, the C-arm "
+        "geometry (angles, SID, SOD, pixel spacing, or 'missing') and the frame that "
+        "reconstruction would use and why. No patient data unless --show-patient.",
+    )
+    p.add_argument("files", nargs="+", metavar="FILE")
+    p.add_argument("--frame", type=int, help="frame index (0-based) to choose instead")
+    p.add_argument("--show-patient", action="store_true", help="also print patient name and ID")
+    p.add_argument("--json", action="store_true", help="print JSON instead of text")
+    _add_geometry_options(p)
+
+    p = sub.add_parser(
+        "phantom",
+        help="make a synthetic angiogram pair with known ground truth",
+        description="Render two XA DICOM files of a synthetic coronary tree with a stenosis, "
+        "with the nominal geometry in the headers and a known header error on view B, "
+        "plus seeds.json (clicks) and truth.json (ground truth).",
+    )
+    p.add_argument("--out", required=True, metavar="DIR", help="output folder")
+    p.add_argument(
+        "--preset",
+        default="static",
+        help="geometry preset: data1, data2, data3 (the paper's Table 1) or static "
+        "(like the real phantom pair); default static",
+    )
+    p.add_argument("--seed", type=int, default=0, help="random seed (same seed, same files)")
+    p.add_argument("--stenosis", type=float, default=50.0, help="%% diameter stenosis")
+    p.add_argument("--frames", type=int, default=1, help="number of cine frames")
+
+    p = sub.add_parser(
+        "reconstruct",
+        help="run the whole pipeline headless and write centerline, mesh and report",
+        description="Load two angiograms, trace the segment clicked in seeds.json in each "
+        "view, calibrate view B (PALM), match points (CBOCD + dynamic programming), "
+        "triangulate, build the surface and measure the narrowing. Writes "
+        "DIR/centerline.csv, DIR/mesh.stl (or --format) and DIR/report.json.",
+    )
+    p.add_argument("file_a", nargs="?", metavar="A", help="reference view (DICOM or PNG/TIFF)")
+    p.add_argument("file_b", nargs="?", metavar="B", help="second view")
+    p.add_argument("--seeds", metavar="FILE", help="clicks file (seeds.json)")
+    p.add_argument("--out", required=True, metavar="DIR", help="output folder")
+    p.add_argument("--demo", action="store_true", help="use the bundled demo case")
+    p.add_argument("--matcher", default="match3", choices=["match1", "match2", "match3", "match4"])
+    p.add_argument("--optimizer", default="palm", choices=["palm", "lm", "anneal"])
+    p.add_argument("--format", default="stl", help="mesh formats, comma separated: stl,obj,ply,glb")
+    p.add_argument("--frame-a", type=int, help="frame of view A (0-based) for a cine")
+    p.add_argument("--frame-b", type=int, help="frame of view B (0-based) for a cine")
+    p.add_argument("--segment", type=int, default=0, help="which segment of seeds.json (0-based)")
+    p.add_argument(
+        "--no-self-calibration",
+        action="store_true",
+        help="calibrate on the clicked features only (skip the deviation-pair loop "
+        "and the refinement over matched points)",
+    )
+    p.add_argument("--quiet", action="store_true", help="no progress on stderr")
+    _add_geometry_options(p)
+
+    p = sub.add_parser(
+        "view",
+        help="open the browser viewer",
+        description="Start the viewer and print its URL. With no files it opens the bundled "
+        "demo case. Binds 127.0.0.1 unless --host says otherwise (angiograms are patient data).",
+    )
+    p.add_argument("file_a", nargs="?", metavar="A")
+    p.add_argument("file_b", nargs="?", metavar="B")
+    p.add_argument("--seeds", metavar="FILE")
+    p.add_argument("--host", default="127.0.0.1")
+    p.add_argument("--port", type=int, default=8080)
+
+    p = sub.add_parser(
+        "bench",
+        help="accuracy and speed benchmarks against phantom ground truth",
+        description="Run a benchmark on synthetic phantom cases, print a table, and write "
+        "the figures as JSON.",
+    )
+    p.add_argument("name", choices=BENCHES)
+    p.add_argument("--json", metavar="PATH", help="write the result here")
+    p.add_argument("--cases", type=int, help="number of cases (per geometry for calibration)")
+    p.add_argument("--seed", type=int, default=0)
+    return parser
+
+
+# ----------------------------------------------------------------- commands
+def cmd_info(args: argparse.Namespace) -> int:
+    from recon.dicom_io import LoadError, describe_file, format_description
+
+    overrides = _overrides(args)
+    failed = False
+    results = []
+    for path in args.files:
+        try:
+            desc = describe_file(
+                path, show_patient=args.show_patient, frame=args.frame, overrides=overrides
+            )
+        except LoadError as exc:
+            print(f"coronary3d: error: {exc}", file=sys.stderr)
+            failed = True
+            continue
+        if args.json:
+            results.append(desc)
+        else:
+            print(format_description(desc))
+            print()
+    if args.json:
+        print(json.dumps(results, indent=2, default=str))
+    return EXIT_USER_ERROR if failed else 0
+
+
+def cmd_phantom(args: argparse.Namespace) -> int:
+    from recon.phantom import PRESETS, make_phantom, write_phantom_case
+
+    if args.preset not in PRESETS:
+        print(
+            f"coronary3d: error: unknown preset {args.preset!r} "
+            f"(choose from {', '.join(sorted(PRESETS))})",
+            file=sys.stderr,
+        )
+        return EXIT_USER_ERROR
+    case = make_phantom(
+        args.preset, args.seed, stenosis_pct=args.stenosis, n_frames=max(1, args.frames)
+    )
+    paths = write_phantom_case(case, Path(args.out))
+    for name, path in paths.items():
+        print(f"{name}: {path}")
+    return 0
+
+
+def cmd_reconstruct(args: argparse.Namespace) -> int:
+    from recon.dicom_io import load_angiogram
+    from recon.pipeline import ReconstructionOptions, reconstruct_pair, write_outputs
+    from recon.seeds import load_seeds
+    from recon.surface import MESH_FORMATS
+
+    if args.demo:
+        file_a = args.file_a or str(DEMO_DIR / "a.dcm")
+        file_b = args.file_b or str(DEMO_DIR / "b.dcm")
+        seeds_path = args.seeds or str(DEMO_DIR / "seeds.json")
+    else:
+        file_a, file_b, seeds_path = args.file_a, args.file_b, args.seeds
+        if not (file_a and file_b and seeds_path):
+            print(
+                "coronary3d: error: reconstruct needs two files A B and --seeds FILE "
+                "(or --demo)",
+                file=sys.stderr,
+            )
+            return EXIT_USER_ERROR
+    formats = tuple(f.strip().lower() for f in args.format.split(",") if f.strip())
+    bad = [f for f in formats if f not in MESH_FORMATS]
+    if bad or not formats:
+        print(
+            f"coronary3d: error: --format {args.format!r}: choose from {', '.join(MESH_FORMATS)}",
+            file=sys.stderr,
+        )
+        return EXIT_USER_ERROR
+
+    def progress(stage: str, fraction: float) -> None:
+        if not args.quiet:
+            print(f"[{fraction * 100:5.1f}%] {stage}", file=sys.stderr, flush=True)
+
+    overrides = _overrides(args)
+    t0 = time.perf_counter()
+    angio_a = load_angiogram(file_a, frame=args.frame_a, overrides=overrides)
+    angio_b = load_angiogram(file_b, frame=args.frame_b, overrides=overrides)
+    seeds = load_seeds(seeds_path)
+    options = ReconstructionOptions(
+        matcher=args.matcher,
+        optimizer=args.optimizer,
+        segment=args.segment,
+        self_calibration=not args.no_self_calibration,
+    )
+    rec = reconstruct_pair(angio_a, angio_b, seeds, options, progress=progress)
+    written = write_outputs(rec, Path(args.out), formats=formats)
+    if not args.quiet:
+        m = rec.measurements
+        print(
+            f"done in {(time.perf_counter() - t0):.2f} s: length {m.segment_length_mm:.1f} mm, "
+            f"MLD {m.mld_mm:.2f} mm, diameter stenosis {m.diameter_stenosis_pct:.0f} %, "
+            f"lesion {m.lesion_length_mm:.1f} mm",
+            file=sys.stderr,
+        )
+    for path in written:
+        print(path)
+    return 0
+
+
+def cmd_view(args: argparse.Namespace) -> int:
+    from viewer_app import run_viewer
+
+    if bool(args.file_a) != bool(args.file_b):
+        print("coronary3d: error: view needs two files A B, or none for the demo", file=sys.stderr)
+        return EXIT_USER_ERROR
+    file_a = args.file_a or str(DEMO_DIR / "a.dcm")
+    file_b = args.file_b or str(DEMO_DIR / "b.dcm")
+    seeds = args.seeds or (None if args.file_a else str(DEMO_DIR / "seeds.json"))
+    run_viewer(
+        file_a,
+        file_b,
+        seeds,
+        host=args.host,
+        port=args.port,
+        on_ready=lambda url: print(f"coronary3d viewer: {url}", flush=True),
+    )
+    return 0
+
+
+def cmd_bench(args: argparse.Namespace) -> int:
+    import importlib
+    import inspect
+
+    module = importlib.import_module(f"recon.bench.{args.name}")
+    kwargs: dict[str, int] = {"seed": args.seed}
+    if args.cases is not None:
+        first = next(iter(inspect.signature(module.run).parameters))  # cases / runs_per_geometry
+        kwargs[first] = args.cases
+    result = module.run(**kwargs)
+    print(module.format_table(result))
+    if args.json:
+        from recon.seeds import atomic_write_bytes
+
+        atomic_write_bytes(
+            Path(args.json), (json.dumps(result, indent=2, default=float) + "\n").encode()
+        )
+        print(f"wrote {args.json}")
+    return 0
+
+
+COMMANDS = {
+    "info": cmd_info,
+    "phantom": cmd_phantom,
+    "reconstruct": cmd_reconstruct,
+    "view": cmd_view,
+    "bench": cmd_bench,
+}
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return COMMANDS[args.command](args)
+    except KeyboardInterrupt:
+        return 130
+    except Exception as exc:
+        if os.environ.get("CORONARY3D_DEBUG"):
+            raise
+        if isinstance(exc, _user_error_types()) or isinstance(exc, OSError):
+            print(f"coronary3d: error: {exc}", file=sys.stderr)
+            return EXIT_USER_ERROR
+        raise
+
+
+if __name__ == "__main__":
+    sys.exit(main())

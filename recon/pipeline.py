@@ -1,0 +1,394 @@
+"""The whole reconstruction, top to bottom, and its output files.
+
+``reconstruct_pair`` is the one function that runs every stage in order;
+the command line (`coronary3d reconstruct`) and the viewer both call it.
+
+    trace both views -> calibrate view B on the clicked features (PALM, eq. 5)
+    -> match (CBOCD + DP, eqs. 6-10) -> recalibrate with deviation pairs
+       (sec. 3.4.2) and refine over the matched points -> match again
+    -> triangulate + smooth (eqs. 2-3) -> elliptic sections + surface
+       (sec. 3.5, eq. 11) -> 3D measurements
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from recon import __version__
+from recon.calibration import CalibrationResult, calibrate
+from recon.centerline import compute_vesselness, trace_segment
+from recon.dicom_io import Angiogram
+from recon.geometry import ViewGeometry, view_separation_deg
+from recon.matching import match_centerlines
+from recon.measure import LumenProfile, Measurements, lumen_profile, measure_lumen
+from recon.seeds import Seeds, atomic_write_bytes
+from recon.surface import SurfaceResult, build_surface, export_mesh
+from recon.triangulation import build_centerline_3d, table3_metrics
+from recon.types import Centerline2D, Centerline3D, Matching
+
+__all__ = [
+    "PipelineError",
+    "ReconstructionOptions",
+    "Reconstruction",
+    "calibrate_from_seeds",
+    "reconstruct_pair",
+    "outputs_as_bytes",
+    "write_outputs",
+]
+
+Progress = Callable[[str, float], None]
+
+CENTERLINE_COLUMNS = (
+    "s_mm",
+    "x_mm",
+    "y_mm",
+    "z_mm",
+    "radius_mm",
+    "diameter_mm",
+    "area_mm2",
+    "radius_a_mm",
+    "radius_b_mm",
+)
+
+
+class PipelineError(ValueError):
+    """The inputs cannot be reconstructed (one line: what and why)."""
+
+
+@dataclass(frozen=True)
+class ReconstructionOptions:
+    """Choices a user can make; the defaults are the paper's method plus self-calibration.
+
+    matcher : "match1".."match4" (the paper's names; match3 = CBOCD adaptive-step DP).
+    optimizer : "palm", "lm" or "anneal" (the paper's Optimize 3, 2, 1).
+    segment : index of the seeds segment to reconstruct.
+    self_calibration : after matching, recalibrate with the deviation pairs
+        (sec. 3.4.2) and refine over the matched centerline points.
+    spacing_mm : arc-length spacing of the 3D centerline.
+    voxel_mm : surface grid size (None: chosen from the vessel radius).
+    """
+
+    matcher: str = "match3"
+    optimizer: str = "palm"
+    segment: int = 0
+    self_calibration: bool = True
+    spacing_mm: float = 0.25
+    voxel_mm: float | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class Reconstruction:
+    """Everything one reconstruction produced."""
+
+    path_a: str
+    path_b: str
+    seeds: Seeds
+    options: ReconstructionOptions
+    view_a: ViewGeometry
+    view_b_header: ViewGeometry
+    view_b: ViewGeometry
+    calibration: CalibrationResult
+    calibration_steps: tuple[dict, ...]
+    centerline_a: Centerline2D
+    centerline_b: Centerline2D
+    matching: Matching
+    centerline_3d: Centerline3D
+    surface: SurfaceResult
+    profile: LumenProfile
+    measurements: Measurements
+    metrics: dict
+    timings_ms: dict = field(default_factory=dict)
+
+    def report(self) -> dict:
+        """JSON-ready report: inputs, geometry, calibration, matching, measurements, timings."""
+        cal = self.calibration
+        return {
+            "software": {"name": "coronary3d", "version": __version__},
+            "inputs": {
+                "a": self.path_a,
+                "b": self.path_b,
+                "segment": self.seeds.segments[self.options.segment].name,
+                "options": self.options.__dict__,
+            },
+            "geometry": {
+                "view_a": self.view_a.to_dict(),
+                "view_b_header": self.view_b_header.to_dict(),
+                "view_b_calibrated": self.view_b.to_dict(),
+                "view_separation_deg": view_separation_deg(self.view_a, self.view_b),
+            },
+            "calibration": {
+                "method": cal.method,
+                "iterations": cal.iterations,
+                "ms": cal.elapsed_ms,
+                "error_before_px": cal.error_before_px,
+                "error_after_px": cal.error_after_px,
+                "error_before_mm": cal.error_before_mm,
+                "error_after_mm": cal.error_after_mm,
+                "rotation_deg": float(np.degrees(np.linalg.norm(self.view_b.rotvec_corr))),
+                "translation_mm": list(self.view_b.t_corr_mm),
+                "warnings": list(cal.warnings),
+                "steps": list(self.calibration_steps),
+            },
+            "matching": {
+                "method": self.matching.method,
+                "standard_view": self.matching.standard_view,
+                "pairs": int(len(self.matching.points_a_px)),
+                "max_row_min_cost_px": self.matching.max_row_min_cost_px,
+                "deviation_pairs": int(len(self.matching.deviation_a_px)),
+                "table3": self.metrics,
+            },
+            "centerline": {
+                "points": int(len(self.centerline_3d.s_mm)),
+                "length_mm": self.centerline_3d.length_mm,
+                "traced_length_a_px": self.centerline_a.length_px,
+                "traced_length_b_px": self.centerline_b.length_px,
+            },
+            "mesh": {
+                "vertices": int(len(self.surface.mesh.vertices)),
+                "faces": int(len(self.surface.mesh.faces)),
+                "watertight": bool(self.surface.mesh.is_watertight),
+                "volume_mm3": float(self.surface.mesh.volume),
+            },
+            "measurements": self.measurements.to_dict(),
+            "timings_ms": self.timings_ms,
+        }
+
+
+def _notify(progress: Progress | None, stage: str, fraction: float) -> None:
+    if progress is not None:
+        progress(stage, fraction)
+
+
+def _segment(seeds: Seeds, index: int):
+    if not seeds.segments:
+        raise PipelineError("seeds: no segment to reconstruct (segments is empty)")
+    if not 0 <= index < len(seeds.segments):
+        raise PipelineError(
+            f"seeds: segment {index} does not exist ({len(seeds.segments)} segment(s))"
+        )
+    return seeds.segments[index]
+
+
+def _features(seeds: Seeds, segment_index: int, cl_a: Centerline2D | None = None,
+              cl_b: Centerline2D | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Corresponding features (K, 2) per view: the segment ends (snapped when traced)
+    and the feature landmarks."""
+    seg = _segment(seeds, segment_index)
+    ends_a = cl_a.points_px[[0, -1]] if cl_a is not None else seg.a[[0, -1]]
+    ends_b = cl_b.points_px[[0, -1]] if cl_b is not None else seg.b[[0, -1]]
+    pa = [ends_a] + [np.asarray([f.a_px]) for f in seeds.features]
+    pb = [ends_b] + [np.asarray([f.b_px]) for f in seeds.features]
+    return np.vstack(pa), np.vstack(pb)
+
+
+def calibrate_from_seeds(
+    angio_a: Angiogram, angio_b: Angiogram, seeds: Seeds, optimizer: str = "palm",
+    segment: int = 0,
+) -> CalibrationResult:
+    """Calibrate view B on the clicked correspondences alone (the viewer's Calibrate)."""
+    pa, pb = _features(seeds, segment)
+    return calibrate(angio_a.geometry, angio_b.geometry, pa, pb, method=optimizer)
+
+
+def reconstruct_pair(
+    angio_a: Angiogram,
+    angio_b: Angiogram,
+    seeds: Seeds,
+    options: ReconstructionOptions | None = None,
+    progress: Progress | None = None,
+) -> Reconstruction:
+    """Run every stage on one segment of a pair of angiograms.
+
+    Parameters
+    ----------
+    angio_a, angio_b : the reference view A and view B (header geometry).
+    seeds : the clinician's clicks; ``options.segment`` selects the segment.
+    progress : called as ``progress(stage, fraction)`` before each stage.
+    """
+    options = options or ReconstructionOptions()
+    seg = _segment(seeds, options.segment)
+    view_a, view_b_header = angio_a.geometry, angio_b.geometry
+    timings: dict[str, float] = {}
+    clock = time.perf_counter()
+
+    def lap(name: str) -> None:
+        nonlocal clock
+        now = time.perf_counter()
+        timings[name] = round((now - clock) * 1000.0, 2)
+        clock = now
+
+    # 1. Vessel centerline, radius and brightness in each view (sec. 3.3.1).
+    _notify(progress, "tracing the vessel in both views", 0.0)
+    cl_a = trace_segment(angio_a.image, seg.a, vesselness=compute_vesselness(angio_a.image),
+                         view="A")
+    cl_b = trace_segment(angio_b.image, seg.b, vesselness=compute_vesselness(angio_b.image),
+                         view="B")
+    lap("trace")
+
+    # 2. Calibrate view B on the corresponding features (eq. 5, PALM).
+    _notify(progress, "calibrating the geometry", 0.35)
+    feat_a, feat_b = _features(seeds, options.segment, cl_a, cl_b)
+    cal = calibrate(view_a, view_b_header, feat_a, feat_b, method=options.optimizer)
+    steps = [_step("features", cal)]
+    lap("calibrate")
+
+    # 3. Point correspondence: epipolar COST, CBOCD, adaptive-step DP (eqs. 6-10).
+    _notify(progress, "matching points between the views", 0.5)
+    matching = match_centerlines(cl_a, cl_b, view_a, cal.view_b, method=options.matcher)
+    lap("match")
+
+    # 4. Self-calibration (sec. 3.4.2): deviation pairs become features, then a
+    #    refinement over all matched points; matching is redone with the result.
+    if options.self_calibration:
+        _notify(progress, "refining the geometry with the matched points", 0.6)
+        cal, matching, extra = _self_calibrate(
+            view_a, view_b_header, feat_a, feat_b, cl_a, cl_b, cal, matching, options
+        )
+        steps += extra
+        lap("self_calibrate")
+
+    # 5. Triangulation and the smooth 3D centerline (eqs. 2-3, eq. 11 radii).
+    _notify(progress, "triangulating the 3D centerline", 0.7)
+    cl3d = build_centerline_3d(matching, view_a, cal.view_b, spacing_mm=options.spacing_mm)
+    metrics = table3_metrics(cl3d, matching, view_a, cal.view_b)
+    lap("triangulate")
+
+    # 6. Elliptic cross-sections and the watertight surface (sec. 3.5).
+    _notify(progress, "building the surface mesh", 0.8)
+    surface = build_surface(cl3d, view_a, cal.view_b, voxel_mm=options.voxel_mm)
+    lap("surface")
+
+    # 7. 3D quantitative coronary analysis.
+    _notify(progress, "measuring the lumen", 0.95)
+    profile = lumen_profile(cl3d.s_mm, surface.sections.area_mm2)
+    measurements = measure_lumen(profile)
+    lap("measure")
+    timings["total"] = round(sum(timings.values()), 2)
+    _notify(progress, "done", 1.0)
+
+    return Reconstruction(
+        path_a=angio_a.path,
+        path_b=angio_b.path,
+        seeds=seeds,
+        options=options,
+        view_a=view_a,
+        view_b_header=view_b_header,
+        view_b=cal.view_b,
+        calibration=cal,
+        calibration_steps=tuple(steps),
+        centerline_a=cl_a,
+        centerline_b=cl_b,
+        matching=matching,
+        centerline_3d=cl3d,
+        surface=surface,
+        profile=profile,
+        measurements=measurements,
+        metrics=metrics,
+        timings_ms=timings,
+    )
+
+
+def _step(name: str, cal: CalibrationResult) -> dict:
+    return {
+        "step": name,
+        "features": cal.n_features,
+        "iterations": cal.iterations,
+        "ms": round(cal.elapsed_ms, 2),
+        "error_after_px": cal.error_after_px,
+    }
+
+
+def _self_calibrate(
+    view_a: ViewGeometry,
+    view_b_header: ViewGeometry,
+    feat_a: np.ndarray,
+    feat_b: np.ndarray,
+    cl_a: Centerline2D,
+    cl_b: Centerline2D,
+    cal: CalibrationResult,
+    matching: Matching,
+    options: ReconstructionOptions,
+) -> tuple[CalibrationResult, Matching, list[dict]]:
+    """Sec. 3.4.2: add deviation pairs as features and calibrate again; then refine
+    over every matched pair (robust, with the priors) and match once more."""
+    steps: list[dict] = []
+    if len(matching.deviation_a_px):
+        pa = np.vstack([feat_a, matching.deviation_a_px])
+        pb = np.vstack([feat_b, matching.deviation_b_px])
+        cal = calibrate(view_a, view_b_header, pa, pb, method=options.optimizer)
+        steps.append(_step("deviation pairs", cal))
+        matching = match_centerlines(cl_a, cl_b, view_a, cal.view_b, method=options.matcher)
+    return cal, matching, steps
+
+
+# --------------------------------------------------------------------- output
+def centerline_csv(rec: Reconstruction) -> bytes:
+    """centerline.csv: header line then one row per point, proximal to distal."""
+    cl = rec.centerline_3d
+    area = rec.surface.sections.area_mm2
+    table = np.column_stack(
+        [
+            cl.s_mm,
+            cl.X_world,
+            np.sqrt(area / np.pi),
+            rec.profile.diameter_mm,
+            area,
+            cl.radius_a_mm,
+            cl.radius_b_mm,
+        ]
+    )
+    buf = io.StringIO()
+    buf.write(",".join(CENTERLINE_COLUMNS) + "\n")
+    np.savetxt(buf, table, delimiter=",", fmt="%.4f")
+    return buf.getvalue().encode()
+
+
+def outputs_as_bytes(rec: Reconstruction, formats: tuple[str, ...] = ("stl",)) -> dict[str, bytes]:
+    """Every output file as bytes, keyed by file name (the viewer's downloads)."""
+    files = {"centerline.csv": centerline_csv(rec)}
+    for fmt in formats:
+        files[f"mesh.{fmt}"] = export_mesh(rec.surface.mesh, fmt)
+    report = json.dumps(rec.report(), indent=2, default=_json_default)
+    files["report.json"] = (report + "\n").encode()
+    files["seeds.json"] = (json.dumps(rec.seeds.to_dict(), indent=2) + "\n").encode()
+    return files
+
+
+def write_outputs(
+    rec: Reconstruction, out_dir: Path, formats: tuple[str, ...] = ("stl",)
+) -> list[Path]:
+    """Write the outputs into ``out_dir``; each file appears whole or not at all.
+
+    Every file is rendered to bytes first, so a failure leaves no file behind.
+    """
+    files = outputs_as_bytes(rec, formats)
+    files.pop("seeds.json")
+    out_dir = Path(out_dir)
+    written = []
+    for name, data in files.items():
+        path = out_dir / name
+        atomic_write_bytes(path, data)
+        written.append(path)
+    return written
+
+
+def _json_default(value: object) -> object:
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, tuple):
+        return list(value)
+    return str(value)
+
+
+def with_options(options: ReconstructionOptions, **changes: object) -> ReconstructionOptions:
+    """A copy of ``options`` with some fields changed (for benches and the viewer)."""
+    return replace(options, **changes)
