@@ -45,6 +45,8 @@ def _add_geometry_options(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group(
         "geometry overrides (for files that lack the tags; apply to every file given)"
     )
+    g.add_argument("--alpha-deg", type=float, help="primary angle, degrees (LAO +, RAO -)")
+    g.add_argument("--beta-deg", type=float, help="secondary angle, degrees (CRA +, CAU -)")
     g.add_argument("--sid-mm", type=float, help="source to detector distance, mm")
     g.add_argument("--sod-mm", type=float, help="source to isocenter distance, mm")
     g.add_argument(
@@ -57,24 +59,25 @@ def _add_geometry_options(p: argparse.ArgumentParser) -> None:
     )
 
 
-def _overrides(args: argparse.Namespace, which: str = ""):
+def _overrides(args: argparse.Namespace):
     """GeometryOverrides from the command-line options (None when none given)."""
     from recon.dicom_io import GeometryOverrides
 
-    json_path = getattr(args, f"geometry_json{which}", None) or getattr(args, "geometry_json", None)
-    base = GeometryOverrides.from_json(json_path) if json_path else GeometryOverrides()
+    json_path = getattr(args, "geometry_json", None)
+    from_json = GeometryOverrides.from_json(json_path) if json_path else None
     spacing = getattr(args, "pixel_spacing_mm", None)
     values = {
+        "alpha_deg": getattr(args, "alpha_deg", None),
+        "beta_deg": getattr(args, "beta_deg", None),
         "sid_mm": getattr(args, "sid_mm", None),
         "sod_mm": getattr(args, "sod_mm", None),
         "pixel_spacing_mm": (spacing, spacing) if spacing else None,
     }
     changes = {k: v for k, v in values.items() if v is not None}
-    if not changes and not json_path:
-        return None
-    from dataclasses import replace
-
-    return replace(base, **changes)
+    if not changes:
+        return from_json
+    from_cli = GeometryOverrides(**changes, source="command line")
+    return from_cli.merged_over(from_json)
 
 
 def build_parser() -> argparse.ArgumentParser:
