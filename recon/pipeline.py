@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from recon import __version__
-from recon.calibration import CalibrationResult, calibrate
+from recon.calibration import CalibrationResult, calibrate, refine_with_matches
 from recon.centerline import compute_vesselness, trace_segment
 from recon.dicom_io import Angiogram
 from recon.geometry import ViewGeometry, view_separation_deg
@@ -325,6 +325,20 @@ def _self_calibrate(
         cal = calibrate(view_a, view_b_header, pa, pb, method=options.optimizer)
         steps.append(_step("deviation pairs", cal))
         matching = match_centerlines(cl_a, cl_b, view_a, cal.view_b, method=options.matcher)
+    # Refinement over the matched centerline (about one pair per 4 px of vessel,
+    # robust Huber loss, priors centred on the header).
+    stride = max(1, len(matching.points_a_px) // 100)
+    cal = refine_with_matches(
+        view_a,
+        view_b_header,
+        feat_a,
+        feat_b,
+        matching.points_a_px[::stride],
+        matching.points_b_px[::stride],
+        initial=cal,
+    )
+    steps.append(_step("matched points", cal))
+    matching = match_centerlines(cl_a, cl_b, view_a, cal.view_b, method=options.matcher)
     return cal, matching, steps
 
 

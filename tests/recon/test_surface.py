@@ -1,0 +1,253 @@
+import io
+
+import numpy as np
+import pytest
+import trimesh
+
+from recon.geometry import ViewGeometry
+from recon.surface import (
+    MESH_FORMATS,
+    CrossSections,
+    SurfaceResult,
+    build_surface,
+    elliptic_cross_sections,
+    export_mesh,
+    intersection_directions,
+)
+from recon.types import Centerline3D
+
+VIEW_A = ViewGeometry(-30.0, 0.0, 1000.0, 750.0, (0.39, 0.39), 512, 512)
+VIEW_B = ViewGeometry(30.0, 0.0, 1000.0, 750.0, (0.39, 0.39), 512, 512)
+# AP and lateral: for a vessel along z the two intersection lines are x and y.
+VIEW_AP = ViewGeometry(0.0, 0.0, 1000.0, 750.0, (0.39, 0.39), 512, 512)
+VIEW_LAT = ViewGeometry(90.0, 0.0, 1000.0, 750.0, (0.39, 0.39), 512, 512)
+
+
+def centerline(X, r_a, r_b=None):
+    X = np.asarray(X, dtype=float)
+    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(X, axis=0), axis=1))])
+    t = np.gradient(X, s, axis=0)
+    t /= np.linalg.norm(t, axis=1, keepdims=True)
+    r_a = np.broadcast_to(np.asarray(r_a, dtype=float), (len(X),)).copy()
+    r_b = r_a.copy() if r_b is None else np.broadcast_to(r_b, (len(X),)).astype(float)
+    return Centerline3D(
+        X_world=X,
+        s_mm=s,
+        tangents=t,
+        radius_a_mm=r_a,
+        radius_b_mm=r_b,
+        X_raw_world=X,
+        points_a_px=np.zeros((len(X), 2)),
+        points_b_px=np.zeros((len(X), 2)),
+    )
+
+
+def straight(length=40.0, direction=(0.6, 0.0, 0.8), origin=(0.0, 3.0, 0.0), step=0.25):
+    t = np.arange(0.0, length + 1e-9, step) - length / 2
+    return np.asarray(origin) + t[:, None] * np.asarray(direction) / np.linalg.norm(direction)
+
+
+def helix(radius=12.0, pitch=15.0, turns=0.8, step=0.25):
+    arc = turns * np.hypot(2 * np.pi * radius, pitch)
+    th = np.linspace(0.0, 2 * np.pi * turns, int(arc / step) + 1)
+    X = np.column_stack([radius * np.cos(th), radius * np.sin(th), pitch * th / (2 * np.pi)])
+    return X, arc
+
+
+def dist_to_polyline(P, X):
+    """Distance (N,) of points P (N, 3) to the polyline X (M, 3) and the closest points."""
+    a, seg = X[:-1], np.diff(X, axis=0)
+    tau = np.einsum("nmk,mk->nm", P[:, None] - a[None], seg) / np.sum(seg**2, axis=1)
+    tau = np.clip(tau, 0.0, 1.0)
+    closest = a[None] + tau[..., None] * seg[None]
+    d = np.linalg.norm(P[:, None] - closest, axis=2)
+    j = np.argmin(d, axis=1)
+    return d[np.arange(len(P)), j], closest[np.arange(len(P)), j]
+
+
+def assert_clean_closed_mesh(mesh):
+    assert mesh.is_watertight
+    assert mesh.is_winding_consistent
+    assert mesh.volume > 0
+    assert np.all(mesh.area_faces > 0)
+    assert len(mesh.split(only_watertight=False)) == 1
+
+
+# --------------------------------------------------------------- sections
+def test_straight_tube_has_circular_sections_of_the_given_radius():
+    cl = centerline(straight(), 1.5)
+    sec = elliptic_cross_sections(cl, VIEW_A, VIEW_B)
+    assert isinstance(sec, CrossSections) and len(sec) == len(cl.X_world)
+    np.testing.assert_allclose(sec.major_mm, 1.5)
+    np.testing.assert_allclose(sec.minor_mm, 1.5)
+    np.testing.assert_allclose(sec.area_mm2, np.pi * 1.5**2)
+    np.testing.assert_allclose(sec.centers, cl.X_world)
+    for axis in (sec.major_axis, sec.minor_axis):
+        np.testing.assert_allclose(np.linalg.norm(axis, axis=1), 1.0)
+        np.testing.assert_allclose(np.einsum("ij,ij->i", axis, sec.normals), 0.0, atol=1e-12)
+    np.testing.assert_allclose(np.einsum("ij,ij->i", sec.major_axis, sec.minor_axis), 0, atol=1e-12)
+
+
+@pytest.mark.parametrize("r_a, r_b", [(2.0, 1.0), (1.0, 2.0)])
+def test_perpendicular_lines_give_major_and_minor_axes(r_a, r_b):
+    X = straight(direction=(0.0, 0.0, 1.0), origin=(0.0, 0.0, 0.0))
+    sec = elliptic_cross_sections(centerline(X, r_a, r_b), VIEW_AP, VIEW_LAT)
+    np.testing.assert_allclose(sec.major_mm, 2.0)
+    np.testing.assert_allclose(sec.minor_mm, 1.0, atol=1e-6)
+    # View AP looks along y, so its diameter lies along x; the lateral view's along y.
+    expected_major = np.array([1.0, 0.0, 0.0]) if r_a > r_b else np.array([0.0, 1.0, 0.0])
+    np.testing.assert_allclose(np.abs(sec.major_axis @ expected_major), 1.0, atol=1e-3)
+    # Axis signs are kept consistent along the vessel.
+    assert np.all(np.einsum("ij,ij->i", sec.major_axis[1:], sec.major_axis[:-1]) > 0)
+
+
+def test_endpoint_of_the_shorter_line_lies_on_the_ellipse():
+    X = straight(direction=(0.0, 0.0, 1.0), origin=(0.0, 0.0, 0.0))
+    cl = centerline(X, 2.0, 1.5)  # lines 60 degrees apart (views at -30 / +30)
+    sec = elliptic_cross_sections(cl, VIEW_A, VIEW_B)
+    l_b = intersection_directions(cl.X_world, sec.normals, VIEW_B)
+    p = 1.5 * l_b
+    x = np.einsum("ij,ij->i", p, sec.major_axis)
+    y = np.einsum("ij,ij->i", p, sec.minor_axis)
+    np.testing.assert_allclose((x / sec.major_mm) ** 2 + (y / sec.minor_mm) ** 2, 1.0, atol=1e-9)
+    assert np.all(sec.minor_mm < 1.5) and np.all(sec.minor_mm > 1.4)
+
+
+def test_intersection_line_is_perpendicular_to_tangent_and_ray():
+    X, _ = helix()
+    cl = centerline(X, 1.0)
+    lines = intersection_directions(cl.X_world, cl.tangents, VIEW_A)
+    rays = cl.X_world - VIEW_A.source_world
+    np.testing.assert_allclose(np.einsum("ij,ij->i", lines, cl.tangents), 0.0, atol=1e-9)
+    np.testing.assert_allclose(np.einsum("ij,ij->i", lines, rays), 0.0, atol=1e-7)
+    # Its projection is the image normal of the projected centerline (up to perspective).
+    p0 = VIEW_A.project(cl.X_world)
+    t2 = VIEW_A.project(cl.X_world + 0.1 * cl.tangents) - p0
+    l2 = VIEW_A.project(cl.X_world + 0.1 * lines) - p0
+    cos = np.abs(np.einsum("ij,ij->i", t2, l2)) / (
+        np.linalg.norm(t2, axis=1) * np.linalg.norm(l2, axis=1)
+    )
+    assert cos.max() < 0.02
+
+
+def test_parallel_lines_fall_back_to_the_shorter_half_length():
+    cl = centerline(straight(), 2.0, 1.2)
+    sec = elliptic_cross_sections(cl, VIEW_A, VIEW_A)
+    np.testing.assert_allclose(sec.major_mm, 2.0)
+    np.testing.assert_allclose(sec.minor_mm, 1.2)
+
+
+def test_vessel_along_the_ray_still_gives_valid_sections():
+    d = VIEW_AP.R_view_from_world[2]  # central ray of the AP view
+    cl = centerline(straight(direction=d, origin=(0.0, 0.0, 0.0)), 1.0, 1.0)
+    sec = elliptic_cross_sections(cl, VIEW_AP, VIEW_LAT)
+    assert np.all(np.isfinite(sec.major_axis)) and np.all(np.isfinite(sec.minor_mm))
+    np.testing.assert_allclose(sec.minor_mm, 1.0)
+
+
+def test_bad_centerline_raises_value_error():
+    cl = centerline(straight(), 1.0)
+    bad = Centerline3D(
+        X_world=cl.X_world,
+        s_mm=cl.s_mm,
+        tangents=cl.tangents,
+        radius_a_mm=cl.radius_a_mm[:-1],
+        radius_b_mm=cl.radius_b_mm,
+        X_raw_world=cl.X_raw_world,
+        points_a_px=cl.points_a_px,
+        points_b_px=cl.points_b_px,
+    )
+    with pytest.raises(ValueError):
+        elliptic_cross_sections(bad, VIEW_A, VIEW_B)
+    with pytest.raises(ValueError):
+        build_surface(cl, VIEW_A, VIEW_B, voxel_mm=-1.0)
+
+
+# ------------------------------------------------------------------ mesh
+def test_straight_tube_mesh_volume_and_outward_normals():
+    r, length = 1.5, 40.0
+    cl = centerline(straight(length=length), r)
+    res = build_surface(cl, VIEW_A, VIEW_B)
+    assert isinstance(res, SurfaceResult)
+    mesh = res.mesh
+    assert_clean_closed_mesh(mesh)
+    expected = np.pi * r**2 * length + 4.0 / 3.0 * np.pi * r**3  # tube + two hemispheres
+    assert mesh.volume == pytest.approx(expected, rel=0.02)
+    dist, closest = dist_to_polyline(mesh.vertices, cl.X_world)
+    np.testing.assert_allclose(dist, r, atol=0.5 * res.voxel_mm)
+    outward = np.einsum("ij,ij->i", mesh.vertex_normals, mesh.vertices - closest)
+    assert np.all(outward > 0)
+    # The caps reach one radius beyond each end.
+    axis = cl.tangents[0]
+    along = (mesh.vertices - cl.X_world[0]) @ axis
+    assert along.min() == pytest.approx(-r, abs=res.voxel_mm)
+    assert along.max() == pytest.approx(length + r, abs=res.voxel_mm)
+
+
+def test_point_cloud_lies_on_the_ellipses_and_caps():
+    cl = centerline(straight(length=10.0), 1.5)
+    res = build_surface(cl, VIEW_A, VIEW_B, n_angles=16)
+    n_rings = 4
+    assert res.point_cloud.shape == (len(cl.X_world) * 16 + 2 * (n_rings * 16 + 1), 3)
+    dist, _ = dist_to_polyline(res.point_cloud, cl.X_world)
+    np.testing.assert_allclose(dist, 1.5, atol=1e-9)
+
+
+def test_helix_tube_mesh():
+    r = 1.2
+    X, arc = helix()
+    res = build_surface(centerline(X, r), VIEW_A, VIEW_B, voxel_mm=0.2)
+    assert_clean_closed_mesh(res.mesh)
+    expected = np.pi * r**2 * arc + 4.0 / 3.0 * np.pi * r**3
+    assert res.mesh.volume == pytest.approx(expected, rel=0.02)
+    dist, _ = dist_to_polyline(res.mesh.vertices, X)
+    np.testing.assert_allclose(dist, r, atol=0.1)
+
+
+def test_elliptic_tube_mesh_volume():
+    X = straight(length=30.0, direction=(0.0, 0.0, 1.0), origin=(0.0, 0.0, 0.0))
+    res = build_surface(centerline(X, 2.0, 1.0), VIEW_AP, VIEW_LAT, voxel_mm=0.15)
+    assert_clean_closed_mesh(res.mesh)
+    a, b = 2.0, 1.0
+    expected = np.pi * a * b * 30.0 + 4.0 / 3.0 * np.pi * a * b * np.sqrt(a * b)
+    assert res.mesh.volume == pytest.approx(expected, rel=0.02)
+    # Wider along x (the AP view's diameter) than along y.
+    mid = np.abs(res.mesh.vertices[:, 2]) < 10.0
+    extent = np.ptp(res.mesh.vertices[mid], axis=0)
+    assert extent[0] == pytest.approx(2 * a, abs=0.1)
+    assert extent[1] == pytest.approx(2 * b, abs=0.1)
+
+
+def test_tapering_stenosed_tube_is_closed():
+    X = straight(length=60.0)
+    s = np.linspace(0.0, 60.0, len(X))
+    r = (2.0 - s / 60.0) * (
+        1 - 0.6 * np.where(np.abs(s - 30) < 5, 0.5 * (1 + np.cos(2 * np.pi * (s - 30) / 10)), 0.0)
+    )
+    res = build_surface(centerline(X, r, 0.9 * r), VIEW_A, VIEW_B)
+    assert_clean_closed_mesh(res.mesh)
+
+
+# ---------------------------------------------------------------- export
+@pytest.fixture(scope="module")
+def tube_mesh():
+    return build_surface(centerline(straight(length=20.0), 1.5), VIEW_A, VIEW_B).mesh
+
+
+@pytest.mark.parametrize("fmt", MESH_FORMATS)
+def test_export_round_trip(tube_mesh, fmt):
+    data = export_mesh(tube_mesh, fmt)
+    assert isinstance(data, bytes) and len(data) > 0
+    loaded = trimesh.load(io.BytesIO(data), file_type=fmt, force="mesh")
+    loaded.merge_vertices()
+    assert loaded.is_watertight
+    assert len(loaded.faces) == len(tube_mesh.faces)
+    assert loaded.volume == pytest.approx(tube_mesh.volume, rel=1e-5)
+    if fmt == "stl":
+        assert data[:80] != b"solid" and len(data) == 84 + 50 * len(tube_mesh.faces)
+        assert len(loaded.vertices) == len(tube_mesh.vertices)
+
+
+def test_export_unknown_format_lists_the_formats(tube_mesh):
+    with pytest.raises(ValueError, match="stl, obj, ply, glb"):
+        export_mesh(tube_mesh, "vtk")
