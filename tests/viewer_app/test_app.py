@@ -1,0 +1,221 @@
+"""ViewerApp on the demo case, served by a real in-process viser server, without a browser."""
+
+from __future__ import annotations
+
+import io
+import json
+import threading
+import urllib.request
+from pathlib import Path
+
+import numpy as np
+import trimesh
+
+from recon.seeds import load_seeds, seeds_from_dict
+from viewer_app import ViewerApp, run_viewer
+
+
+def _line_distance_px(seg: np.ndarray, point_px: np.ndarray) -> float:
+    """Distance of a point (2,) to the infinite line through a segment (2, 2)."""
+    d = seg[1] - seg[0]
+    w = np.asarray(point_px, dtype=float) - seg[0]
+    return float(abs(d[0] * w[1] - d[1] * w[0]) / np.linalg.norm(d))
+
+
+def test_server_binds_localhost_on_a_free_port(app: ViewerApp) -> None:
+    assert app.url == f"http://127.0.0.1:{app.port}/"
+    assert app.port > 0
+    with urllib.request.urlopen(app.url, timeout=10) as resp:
+        assert resp.status == 200
+    assert set(app.views) == {"a", "b"}
+    assert app.seeds().segments, "the demo seeds are loaded on start"
+
+
+def test_clicks_snap_to_the_vessel_and_draw_the_epipolar_line(
+    app: ViewerApp, demo_case: dict[str, Path], artifacts_dir: Path
+) -> None:
+    seeds = load_seeds(demo_case["seeds"])
+    col, row = seeds.segments[0].a_px[0]
+    app.wait_ready()  # vesselness maps computed (in the background since start)
+    app.clear()
+    app.set_mode("proximal")
+    mark = app.click("a", col + 1.5, row - 1.0)  # a clinician's click, a bit off
+    assert mark is not None and mark.kind == "proximal" and mark.view == "a"
+    assert mark.snap_distance_px is not None, app.notifications[-1:]
+    assert mark.point_px != mark.raw_px
+    epi = app.epipolar_segments
+    assert epi["a"] is None and epi["b"] is not None
+    assert app.views["a"].handles["marks"].points.shape == (1, 3)
+    assert app.views["b"].handles["epipolar"].points.shape == (1, 2, 3)
+    timings_ms = [app.last_click_ms]
+    for dx in (-1.0, 0.5, 1.0, -0.5):  # more clicks for the figure in the report
+        app.click("a", col + dx, row + dx)
+        timings_ms.append(app.last_click_ms)
+    (artifacts_dir / "click_to_epipolar_ms.txt").write_text(
+        f"median {np.median(timings_ms):.2f} ms, max {np.max(timings_ms):.2f} ms "
+        f"over {len(timings_ms)} clicks (server side)\n"
+    )
+
+    # Far from any vessel: kept raw, and the user is told.
+    corner = app.click("a", 2.0, 2.0)
+    assert corner is not None and corner.snap_distance_px is None
+    assert corner.point_px == corner.raw_px == (2.0, 2.0)
+    assert app.notifications[-1][0] == "warning"
+
+    # Feature pair: A then B; undo removes the last click.
+    app.set_mode("feature")
+    app.click("a", *seeds.segments[0].a_px[-1])
+    app.click("b", *seeds.segments[0].b_px[-1])
+    assert len(app.seeds().features) == 1
+    assert app.undo()
+    assert len(app.seeds().features) == 0
+    app.clear()
+    assert app.state.marks == []
+    assert app.views["a"].handles["marks"].points.shape == (0, 3)
+
+
+def test_calibration_moves_epipolar_lines_onto_the_partner_points(app: ViewerApp) -> None:
+    st = app.state
+    pairs = [(m, st.partner(m)) for m in st.marks if m.view == "a" and st.partner(m) is not None]
+    assert len(pairs) >= 2
+
+    def worst_distance() -> float:
+        dists = []
+        for mark, partner in pairs:
+            app.select(mark.id)
+            view, seg = "b", app.epipolar_segments["b"]
+            assert seg is not None, view
+            dists.append(_line_distance_px(seg, np.asarray(partner.point_px)))
+        return max(dists)
+
+    before = worst_distance()
+    res = app.calibrate()
+    assert res is not None, app.notifications[-1:]
+    after = worst_distance()
+    assert after < 2.0 < before
+    assert "error (px)" in app._gui["calib_md"].content
+
+
+def test_reconstruct_then_export(app: ViewerApp) -> None:
+    rec = app.reconstruct()
+    assert rec is not None, app.notifications[-3:]
+    stages = [s for s, _ in app.progress_log]
+    assert stages[0] != stages[-1] and app.progress_log[-1][1] == 1.0
+    assert len(rec.surface.mesh.faces) > 100
+    for key in ("a", "b"):  # traced and back-projected centerlines on both images
+        assert len(app.views[key].handles["trace"].points) > 10
+        assert len(app.views[key].handles["backproj"].points) > 10
+    table = app._gui["results_md"].content
+    assert table.startswith("| measurement | value |") and "| Table 3 |" in table
+    assert app._gui["plot"].visible
+
+    stl = app.export("stl")
+    mesh = trimesh.load(io.BytesIO(stl), file_type="stl")
+    assert len(mesh.faces) == len(rec.surface.mesh.faces)
+    for fmt in ("obj", "ply", "glb"):
+        assert len(app.export(fmt)) > 1000
+    csv = app.export("centerline.csv").decode()
+    assert csv.splitlines()[0].startswith("s_mm,x_mm,y_mm,z_mm")
+    assert len(csv.splitlines()) > 10
+    report = json.loads(app.export("report.json"))
+    assert report["centerline"]["length_mm"] > 0
+    seeds = seeds_from_dict(json.loads(app.export("seeds.json")))
+    assert seeds == app.seeds()
+
+
+def test_export_before_reconstruct_is_a_user_error(app: ViewerApp) -> None:
+    try:
+        app.export("stl")
+    except ValueError as exc:
+        assert "reconstruct first" in str(exc)
+    else:
+        raise AssertionError("export without a reconstruction must raise ValueError")
+    app.download("stl")  # through the GUI path: a notification, not an exception
+    assert app.notifications[-1][0] == "error"
+
+
+def test_bad_files_become_notifications(app: ViewerApp, tmp_path: Path) -> None:
+    bad = tmp_path / "not_a_dicom.dcm"
+    bad.write_bytes(b"this is not DICOM")
+    good_b = app.views["b"].angio.path
+    assert app.open_pair(str(bad), good_b) is False
+    level, title, body = app.notifications[-1]
+    assert level == "error" and "not_a_dicom.dcm" in body and "\n" not in body
+    assert app.open_upload("a", "upload.dcm", b"garbage") is False
+    assert app.notifications[-1][0] == "error"
+    broken_seeds = tmp_path / "seeds.json"
+    broken_seeds.write_text("{not json")
+    assert app.load_seeds(broken_seeds) is False
+    assert app.notifications[-1][0] == "error"
+    assert app.calibrate is not None and app.click("a", 100.0, 100.0) is not None  # still alive
+
+
+def test_marks_are_autosaved_and_restored(demo_case: dict[str, Path], tmp_path: Path) -> None:
+    autosave = tmp_path / "out" / "seeds.autosave.json"
+    kwargs = dict(host="127.0.0.1", port=0, autosave_path=autosave)
+    first = ViewerApp(str(demo_case["a"]), str(demo_case["b"]), None, **kwargs)
+    try:
+        first.set_mode("waypoint")
+        first.click("a", 150.0, 160.0)
+        first.set_mode("feature")
+        first.click("a", 200.0, 210.0)
+        marks = [(m.kind, m.view, m.point_px) for m in first.state.marks]
+    finally:
+        first.stop()
+    assert autosave.is_file()
+    second = ViewerApp(str(demo_case["a"]), str(demo_case["b"]), None, **kwargs)
+    try:
+        assert second.restored_autosave
+        assert [(m.kind, m.view, m.point_px) for m in second.state.marks] == marks
+        path = tmp_path / "saved_seeds.json"
+        second.save_seeds(path)
+        assert load_seeds(path) == second.seeds()
+    finally:
+        second.stop()
+
+
+def test_run_viewer_reports_its_url_and_stops(demo_case: dict[str, Path], tmp_path: Path) -> None:
+    urls: list[str] = []
+    ready = threading.Event()
+    stop = threading.Event()
+
+    def on_ready(url: str) -> None:
+        urls.append(url)
+        ready.set()
+
+    thread = threading.Thread(
+        target=run_viewer,
+        args=(str(demo_case["a"]), str(demo_case["b"]), str(demo_case["seeds"])),
+        kwargs=dict(port=0, on_ready=on_ready, autosave_path=tmp_path / "a.json",
+                    stop_event=stop),
+        daemon=True,
+    )
+    thread.start()
+    assert ready.wait(30)
+    assert urls[0].startswith("http://127.0.0.1:")
+    with urllib.request.urlopen(urls[0], timeout=10) as resp:
+        assert resp.status == 200
+    stop.set()
+    thread.join(10)
+    assert not thread.is_alive()
+
+
+def test_cine_frame_slider_and_missing_geometry(tmp_path: Path) -> None:
+    data = Path(__file__).resolve().parents[1] / "data"
+    app = ViewerApp(str(data / "IM7.dcm"), str(data / "IM8.dcm"), None, host="127.0.0.1",
+                    port=0, autosave_path=tmp_path / "auto.json")
+    try:
+        slider = app._gui["frame_a"]
+        assert slider.visible and slider.max == 8
+        assert slider.value == app.views["a"].angio.frame_index  # the loader's chosen frame
+        before = app.views["a"].handles["image"].image.copy()
+        slider.value = 1  # as if the user dragged it
+        assert app.views["a"].angio.frame_index == 1
+        assert not np.array_equal(app.views["a"].handles["image"].image, before)
+        # A real clinical cine without SID/SOD/spacing: an error notification, the app lives on.
+        assert app.open_pair(str(data / "rca-cine-ecg.dcm"), str(data / "IM8.dcm")) is False
+        level, _, body = app.notifications[-1]
+        assert level == "error" and "DistanceSourceToDetector" in body
+        assert app.views["a"].angio.path.endswith("IM7.dcm")
+    finally:
+        app.stop()

@@ -1,0 +1,179 @@
+"""viewer_app.state without viser or images: marks, modes, undo, seeds, epipolar lines, autosave."""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from recon.geometry import ViewGeometry, epipolar_lines
+from recon.seeds import Feature, Seeds, Segment, seeds_from_dict
+from viewer_app.state import Autosave, MarkState, clip_line_to_image
+
+VIEW_A = ViewGeometry(-30.0, 20.0, 1000.0, 750.0, (0.3, 0.3), 400, 500)
+VIEW_B = ViewGeometry(35.0, 15.0, 1000.0, 750.0, (0.3, 0.3), 400, 500)
+
+
+def _line_distance_px(seg: np.ndarray, point_px: np.ndarray) -> float:
+    """Distance of a point (2,) to the infinite line through a segment (2, 2)."""
+    d = seg[1] - seg[0]
+    w = point_px - seg[0]
+    return float(abs(d[0] * w[1] - d[1] * w[0]) / np.linalg.norm(d))
+
+
+def _state() -> MarkState:
+    return MarkState(VIEW_A, VIEW_B)
+
+
+def test_clip_line_to_image_known_cases() -> None:
+    # Horizontal line row = 100 across a 500 x 400 image.
+    seg = clip_line_to_image([0.0, 1.0, -100.0], 500, 400)
+    np.testing.assert_allclose(sorted(seg[:, 0]), [-0.5, 499.5])
+    np.testing.assert_allclose(seg[:, 1], [100.0, 100.0])
+    # Diagonal col = row through the corner region.
+    seg = clip_line_to_image(np.array([1.0, -1.0, 0.0]) / np.sqrt(2), 500, 400)
+    np.testing.assert_allclose(seg[np.argsort(seg[:, 0])], [[-0.5, -0.5], [399.5, 399.5]])
+    # A line outside the image.
+    assert clip_line_to_image([0.0, 1.0, 1000.0], 500, 400) is None
+
+
+def test_modes_build_segments_and_feature_pairs() -> None:
+    st = _state()
+    st.set_mode("proximal")
+    st.click("a", 10, 20)
+    st.click("b", 11, 21)
+    st.set_mode("waypoint")
+    st.click("a", 30, 40)
+    st.click("a", 50, 60)
+    st.set_mode("distal")
+    st.click("a", 100, 120)
+    st.click("a", 101, 121)  # replaces the distal end in A
+    st.click("b", 90, 95)
+    st.set_mode("feature")
+    st.click("a", 200, 210)  # landmark in A ...
+    st.click("b", 220, 230)  # ... then its partner in B
+    st.click("b", 300, 310)  # a second landmark, B first
+    seeds = st.to_seeds()
+    assert seeds.segments == (
+        Segment("Segment 1", ((10, 20), (30, 40), (50, 60), (101, 121)), ((11, 21), (90, 95))),
+    )
+    assert seeds.features == (Feature("feature 1", (200, 210), (220, 230)),)
+    assert st.missing() == ["feature 2: partner missing in A"]
+    st.click("a", 305, 315)
+    assert len(st.to_seeds().features) == 2
+    labels = {st.label(m) for m in st.marks}
+    assert {"P1", "D1", "W1.1", "W1.2", "F1", "F2"} <= labels
+
+
+def test_undo_and_clear() -> None:
+    st = _state()
+    st.click("a", 10, 20)
+    st.click("a", 15, 25)  # replaces the proximal end
+    assert [m.point_px for m in st.marks] == [(15.0, 25.0)]
+    assert st.undo()
+    assert [m.point_px for m in st.marks] == [(10.0, 20.0)]
+    st.clear()
+    assert st.marks == []
+    assert st.undo()
+    assert len(st.marks) == 1
+    assert st.undo() and st.marks == []
+    assert not st.undo()
+
+
+def test_click_outside_the_image_is_refused_with_a_message() -> None:
+    st = _state()
+    with pytest.raises(ValueError, match="outside image A"):
+        st.click("a", 600.0, 10.0)
+    assert st.marks == []
+
+
+def test_snapper_is_used_and_its_message_kept() -> None:
+    def snapper(view, raw):
+        if raw[0] < 100:
+            return raw + [1.0, 0.0], 1.0, None
+        return raw, None, "far from any vessel"
+
+    st = MarkState(VIEW_A, VIEW_B, snapper=snapper)
+    m = st.click("a", 50, 50)
+    assert m.point_px == (51.0, 50.0) and m.raw_px == (50.0, 50.0) and m.snap_distance_px == 1.0
+    m = st.click("b", 150, 50)
+    assert m.point_px == (150.0, 50.0) and m.snap_distance_px is None
+    assert st.last_message == "far from any vessel"
+
+
+def test_epipolar_segment_of_the_selected_mark_lies_on_its_line() -> None:
+    st = _state()
+    X = np.array([[5.0, -10.0, 20.0]])
+    pa, pb = VIEW_A.project(X)[0], VIEW_B.project(X)[0]
+    st.click("a", *pa)
+    view, seg = st.epipolar_segment()
+    assert view == "b"
+    line = epipolar_lines(pa[None], VIEW_A, VIEW_B)[0]
+    np.testing.assert_allclose(seg @ line[:2] + line[2], 0.0, atol=1e-9)
+    # the true partner lies on it: distance from pb to the segment's line
+    assert _line_distance_px(seg, pb) < 1e-6
+    st.click("b", *pb)  # selecting a B mark draws its line in A
+    assert st.epipolar_segment()[0] == "a"
+
+
+def test_calibrated_geometry_is_used_for_epipolar_lines() -> None:
+    st = _state()
+    truth_b = VIEW_B.with_correction([0.0, 0.02, 0.0], [2.0, 0.0, -1.0])
+    X = np.array([[5.0, -10.0, 20.0]])
+    pa, pb_true = VIEW_A.project(X)[0], truth_b.project(X)[0]
+    st.click("a", *pa)
+
+    def dist() -> float:
+        return _line_distance_px(st.epipolar_segment()[1], pb_true)
+
+    assert dist() > 3.0
+    st.set_calibrated_b(truth_b)
+    assert dist() < 1e-6
+
+
+def test_seeds_round_trip_through_marks() -> None:
+    seeds = seeds_from_dict(
+        {
+            "segments": [
+                {"name": "LAD", "a": [[1, 2], [3, 4], [5, 6]], "b": [[7, 8], [9, 10]]},
+                {"name": "LCx", "a": [[11, 12], [13, 14]], "b": [[15, 16], [17, 18]]},
+            ],
+            "features": [{"name": "feature 1", "a": [20, 21], "b": [22, 23]}],
+        }
+    )
+    st = _state()
+    st.load_seeds(seeds)
+    assert st.to_seeds() == seeds
+    assert st.segment_names == ["LAD", "LCx"]
+
+
+def test_autosave_round_trip_keeps_incomplete_marks(tmp_path: Path) -> None:
+    a, b = tmp_path / "a.dcm", tmp_path / "b.dcm"
+    st = _state()
+    st.click("a", 10, 20)
+    st.set_mode("feature")
+    st.click("b", 30, 40)  # a feature still waiting for its partner
+    store = Autosave(tmp_path / "auto.json", str(a), str(b))
+    store.save(st)
+    doc = json.loads((tmp_path / "auto.json").read_text())
+    seeds_from_dict(doc)  # the autosave is a valid seeds document as well
+    restored = _state()
+    assert store.load_into(restored, None)
+    assert [(m.kind, m.view, m.point_px) for m in restored.marks] == [
+        ("proximal", "a", (10.0, 20.0)),
+        ("feature", "b", (30.0, 40.0)),
+    ]
+    assert restored.mode == "feature"
+    # another pair does not pick it up
+    assert not Autosave(tmp_path / "auto.json", str(b), str(a)).load_into(_state(), None)
+    # a seeds file newer than the autosave wins
+    seeds_path = tmp_path / "seeds.json"
+    seeds_path.write_text(json.dumps(Seeds().to_dict()))
+    t = (tmp_path / "auto.json").stat().st_mtime
+    os.utime(seeds_path, (t + 10, t + 10))
+    assert not store.load_into(_state(), seeds_path)
+    os.utime(seeds_path, (t - 10, t - 10))
+    assert store.load_into(_state(), seeds_path)

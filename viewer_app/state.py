@@ -1,0 +1,535 @@
+"""The viewer's state without any GUI: marks, modes, undo, seeds, epipolar lines, autosave.
+
+Nothing here imports viser; :mod:`viewer_app.app` wires this state to the
+browser. Pixel coordinates follow the project's C-arm convention: (col, row),
+0-based, (0, 0) the centre of the top-left pixel.
+
+A clinician places marks in a *mode*:
+
+- ``"proximal"`` / ``"distal"``: the ends of the current segment in the
+  clicked view (one of each per view and segment; a new click replaces it);
+- ``"waypoint"``: a point between the ends that keeps the trace on the
+  vessel (any number per view, kept in click order);
+- ``"feature"``: a landmark seen in both views, clicked in one view and then
+  its partner in the other.
+
+The marks convert to and from :class:`recon.seeds.Seeds` (the same
+seeds.json the command line reads).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from recon.geometry import ViewGeometry, epipolar_lines
+from recon.seeds import Feature, Seeds, Segment, atomic_write_bytes, seeds_from_dict
+
+__all__ = [
+    "MODES",
+    "MODE_LABELS",
+    "Mark",
+    "MarkState",
+    "Autosave",
+    "clip_line_to_image",
+    "default_autosave_path",
+]
+
+FloatArray = NDArray[np.float64]
+
+MODES: tuple[str, ...] = ("proximal", "waypoint", "distal", "feature")
+MODE_LABELS: dict[str, str] = {
+    "proximal": "Segment proximal end",
+    "waypoint": "Waypoint",
+    "distal": "Segment distal end",
+    "feature": "Feature pair (A then B)",
+}
+VIEWS: tuple[str, str] = ("a", "b")
+
+# A snapper takes (view, raw click (2,)) and returns (placed point (2,), snap distance in
+# px or None when the click was kept raw, a one-line message for the user or None).
+Snapper = Callable[[str, FloatArray], tuple[FloatArray, float | None, str | None]]
+
+
+def _other(view: str) -> str:
+    return "b" if view == "a" else "a"
+
+
+def _check_view(view: str) -> str:
+    if view not in VIEWS:
+        raise ValueError(f"view must be 'a' or 'b', got {view!r}")
+    return view
+
+
+@dataclass(frozen=True)
+class Mark:
+    """One placed click.
+
+    Attributes
+    ----------
+    id : unique, increasing in click order.
+    kind : one of :data:`MODES`.
+    view : "a" or "b".
+    group : segment index (proximal/waypoint/distal) or feature index.
+    point_px : (2,) placed position (col, row), snapped when possible.
+    raw_px : (2,) where the user clicked.
+    snap_distance_px : distance from raw to snapped point, None if kept raw.
+    """
+
+    id: int
+    kind: str
+    view: str
+    group: int
+    point_px: tuple[float, float]
+    raw_px: tuple[float, float]
+    snap_distance_px: float | None = None
+
+    def to_dict(self) -> dict:
+        return {
+            "id": self.id,
+            "kind": self.kind,
+            "view": self.view,
+            "group": self.group,
+            "point_px": list(self.point_px),
+            "raw_px": list(self.raw_px),
+            "snap_distance_px": self.snap_distance_px,
+        }
+
+    @classmethod
+    def from_dict(cls, data: dict) -> Mark:
+        return cls(
+            id=int(data["id"]),
+            kind=str(data["kind"]),
+            view=str(data["view"]),
+            group=int(data["group"]),
+            point_px=(float(data["point_px"][0]), float(data["point_px"][1])),
+            raw_px=(float(data["raw_px"][0]), float(data["raw_px"][1])),
+            snap_distance_px=(
+                None if data.get("snap_distance_px") is None else float(data["snap_distance_px"])
+            ),
+        )
+
+
+def clip_line_to_image(line: ArrayLike, cols: int, rows: int) -> FloatArray | None:
+    """Clip a line a col + b row + c = 0 to the image rectangle.
+
+    Parameters
+    ----------
+    line : (3,) line coefficients (a, b, c).
+    cols, rows : image size; the rectangle spans [-0.5, cols - 0.5] x [-0.5, rows - 0.5].
+
+    Returns
+    -------
+    (2, 2) end points (col, row) of the visible part, or None if the line
+    misses the image.
+    """
+    a, b, c = (float(x) for x in np.asarray(line, dtype=float).reshape(3))
+    lo_c, hi_c, lo_r, hi_r = -0.5, cols - 0.5, -0.5, rows - 0.5
+    cand: list[tuple[float, float]] = []
+    if abs(b) > 1e-12:  # intersections with the left and right borders
+        for col in (lo_c, hi_c):
+            cand.append((col, -(a * col + c) / b))
+    if abs(a) > 1e-12:  # intersections with the top and bottom borders
+        for row in (lo_r, hi_r):
+            cand.append((-(b * row + c) / a, row))
+    eps = 1e-9
+    pts = np.array(
+        [p for p in cand if lo_c - eps <= p[0] <= hi_c + eps and lo_r - eps <= p[1] <= hi_r + eps]
+    ).reshape(-1, 2)
+    if len(pts) < 2:
+        return None
+    direction = np.array([-b, a])  # along the line
+    t = pts @ direction
+    seg = np.stack([pts[np.argmin(t)], pts[np.argmax(t)]])
+    if np.linalg.norm(seg[1] - seg[0]) < 1e-9:
+        return None
+    return seg
+
+
+class MarkState:
+    """Marks of one image pair, with undo, modes, selection and epipolar lines.
+
+    Parameters
+    ----------
+    view_a, view_b : nominal geometries of the two views (view B may later be
+        replaced by its calibrated geometry with :meth:`set_calibrated_b`).
+    snapper : optional function snapping a click to the vessel (see ``Snapper``).
+    """
+
+    def __init__(
+        self,
+        view_a: ViewGeometry,
+        view_b: ViewGeometry,
+        snapper: Snapper | None = None,
+    ) -> None:
+        self.view_a = view_a
+        self.view_b_nominal = view_b
+        self.view_b_calibrated: ViewGeometry | None = None
+        self.snapper = snapper
+        self.mode: str = "proximal"
+        self.marks: list[Mark] = []
+        self.segment_names: list[str] = ["Segment 1"]
+        self.current_segment: int = 0
+        self.selected_id: int | None = None
+        self._next_id: int = 1
+        self._history: list[tuple] = []
+        self.last_message: str | None = None
+        self.last_epipolar_ms: float = 0.0
+
+    # ------------------------------------------------------------ geometry
+    @property
+    def view_b(self) -> ViewGeometry:
+        """View B's geometry in use: calibrated if available, else nominal."""
+        return self.view_b_calibrated if self.view_b_calibrated is not None else self.view_b_nominal
+
+    def geometry(self, view: str) -> ViewGeometry:
+        return self.view_a if _check_view(view) == "a" else self.view_b
+
+    def set_calibrated_b(self, view_b: ViewGeometry | None) -> None:
+        """Use a calibrated geometry for view B (None: back to the header geometry)."""
+        self.view_b_calibrated = view_b
+
+    # ------------------------------------------------------------ undo
+    def _snapshot(self) -> tuple:
+        return (
+            list(self.marks),
+            list(self.segment_names),
+            self.current_segment,
+            self.selected_id,
+            self._next_id,
+        )
+
+    def _push(self) -> None:
+        self._history.append(self._snapshot())
+        del self._history[:-200]
+
+    def undo(self) -> bool:
+        """Revert the last change of the marks. Returns False if there was nothing to undo."""
+        if not self._history:
+            return False
+        (
+            self.marks,
+            self.segment_names,
+            self.current_segment,
+            self.selected_id,
+            self._next_id,
+        ) = self._history.pop()
+        return True
+
+    def clear(self) -> None:
+        """Remove all marks (undoable)."""
+        self._push()
+        self.marks = []
+        self.segment_names = ["Segment 1"]
+        self.current_segment = 0
+        self.selected_id = None
+
+    # ------------------------------------------------------------ modes
+    def set_mode(self, mode: str) -> None:
+        if mode not in MODES:
+            raise ValueError(f"mode must be one of {', '.join(MODES)}, got {mode!r}")
+        self.mode = mode
+
+    def new_segment(self, name: str | None = None) -> int:
+        """Start a new segment and make it current; returns its index."""
+        self._push()
+        self.segment_names.append(name or f"Segment {len(self.segment_names) + 1}")
+        self.current_segment = len(self.segment_names) - 1
+        return self.current_segment
+
+    def set_current_segment(self, index: int) -> None:
+        if not 0 <= index < len(self.segment_names):
+            raise ValueError(f"no segment {index} (there are {len(self.segment_names)})")
+        self.current_segment = index
+
+    # ------------------------------------------------------------ marks
+    def _place(self, view: str, raw_px: FloatArray) -> tuple[FloatArray, float | None]:
+        self.last_message = None
+        if self.snapper is None:
+            return raw_px, None
+        point, distance, message = self.snapper(view, raw_px)
+        self.last_message = message
+        return np.asarray(point, dtype=float).reshape(2), distance
+
+    def click(self, view: str, col: float, row: float) -> Mark:
+        """Place a mark at pixel (col, row) of ``view`` in the current mode.
+
+        The click is snapped to the vessel by the snapper if there is one; a
+        click too far from any vessel is kept raw and :attr:`last_message`
+        says so. Returns the new mark, which becomes the selected one.
+        """
+        _check_view(view)
+        geom = self.geometry(view)
+        if not (-0.5 <= col <= geom.cols - 0.5 and -0.5 <= row <= geom.rows - 0.5):
+            raise ValueError(
+                f"click ({col:.1f}, {row:.1f}) is outside image {view.upper()} "
+                f"({geom.cols}x{geom.rows})"
+            )
+        raw = np.array([col, row], dtype=float)
+        point, distance = self._place(view, raw)
+        self._push()
+        kind = self.mode
+        if kind == "feature":
+            group = self._feature_group_for(view)
+        else:
+            group = self.current_segment
+        if kind in ("proximal", "distal", "feature"):  # one per (kind, view, group)
+            self.marks = [
+                m
+                for m in self.marks
+                if not (m.kind == kind and m.view == view and m.group == group)
+            ]
+        mark = Mark(
+            id=self._next_id,
+            kind=kind,
+            view=view,
+            group=group,
+            point_px=(float(point[0]), float(point[1])),
+            raw_px=(float(raw[0]), float(raw[1])),
+            snap_distance_px=distance,
+        )
+        self._next_id += 1
+        self.marks.append(mark)
+        self.selected_id = mark.id
+        return mark
+
+    def _feature_group_for(self, view: str) -> int:
+        """Feature index a click in ``view`` goes to: the pending partner, or a new one."""
+        groups: dict[int, set[str]] = {}
+        for m in self.marks:
+            if m.kind == "feature":
+                groups.setdefault(m.group, set()).add(m.view)
+        for g in sorted(groups):
+            if groups[g] == {_other(view)}:
+                return g
+        if groups:
+            last = max(groups)
+            if groups[last] == {view}:  # still waiting for its partner: replace the click
+                return last
+            return last + 1
+        return 0
+
+    def select(self, mark_id: int | None) -> None:
+        if mark_id is not None and self.mark_by_id(mark_id) is None:
+            raise ValueError(f"no mark with id {mark_id}")
+        self.selected_id = mark_id
+
+    def mark_by_id(self, mark_id: int | None) -> Mark | None:
+        for m in self.marks:
+            if m.id == mark_id:
+                return m
+        return None
+
+    @property
+    def selected(self) -> Mark | None:
+        return self.mark_by_id(self.selected_id)
+
+    def marks_in(self, view: str) -> list[Mark]:
+        return [m for m in self.marks if m.view == view]
+
+    def label(self, mark: Mark) -> str:
+        """Short label drawn next to a mark: P1, D1, W1.2 (segment 1, waypoint 2), F3."""
+        if mark.kind == "feature":
+            return f"F{mark.group + 1}"
+        if mark.kind == "waypoint":
+            same = [
+                m.id
+                for m in self.marks
+                if m.kind == "waypoint" and m.view == mark.view and m.group == mark.group
+            ]
+            return f"W{mark.group + 1}.{same.index(mark.id) + 1}"
+        return f"{'P' if mark.kind == 'proximal' else 'D'}{mark.group + 1}"
+
+    def partner(self, mark: Mark) -> Mark | None:
+        """The corresponding mark in the other view (segment end or feature), if placed."""
+        if mark.kind == "waypoint":
+            return None
+        for m in self.marks:
+            if m.kind == mark.kind and m.group == mark.group and m.view != mark.view:
+                return m
+        return None
+
+    # ------------------------------------------------------------ epipolar
+    def epipolar_segment(self, mark: Mark | None = None) -> tuple[str, FloatArray] | None:
+        """Epipolar line of a mark (default: the selected one), drawn in the other view.
+
+        Returns (view the line is drawn in, (2, 2) end points (col, row) clipped
+        to that image), or None when nothing is selected or the line misses the
+        image. Uses the calibrated view B when there is one (eq. 4 through
+        :func:`recon.geometry.epipolar_lines`).
+        """
+        t0 = time.perf_counter()
+        mark = mark if mark is not None else self.selected
+        if mark is None:
+            return None
+        src, dst = self.geometry(mark.view), self.geometry(_other(mark.view))
+        line = epipolar_lines(np.asarray([mark.point_px]), src, dst)[0]
+        seg = clip_line_to_image(line, dst.cols, dst.rows)
+        self.last_epipolar_ms = (time.perf_counter() - t0) * 1e3
+        return None if seg is None else (_other(mark.view), seg)
+
+    # ------------------------------------------------------------ seeds
+    def to_seeds(self) -> Seeds:
+        """The complete marks as seeds: segments with both ends in both views, paired features."""
+        segments = []
+        for g, name in enumerate(self.segment_names):
+            views: dict[str, list[tuple[float, float]]] = {}
+            for view in VIEWS:
+                ends = {
+                    m.kind: m.point_px
+                    for m in self.marks
+                    if m.view == view and m.group == g and m.kind in ("proximal", "distal")
+                }
+                if len(ends) < 2:
+                    break
+                way = [
+                    m.point_px
+                    for m in self.marks
+                    if m.view == view and m.group == g and m.kind == "waypoint"
+                ]
+                views[view] = [ends["proximal"], *way, ends["distal"]]
+            if len(views) == 2:
+                segments.append(Segment(name=name, a_px=tuple(views["a"]), b_px=tuple(views["b"])))
+        features = []
+        groups = sorted({m.group for m in self.marks if m.kind == "feature"})
+        for g in groups:
+            pts = {m.view: m.point_px for m in self.marks if m.kind == "feature" and m.group == g}
+            if len(pts) == 2:
+                features.append(Feature(name=f"feature {g + 1}", a_px=pts["a"], b_px=pts["b"]))
+        return Seeds(segments=tuple(segments), features=tuple(features))
+
+    def missing(self) -> list[str]:
+        """One line per incomplete item, e.g. 'Segment 1: distal end missing in B'."""
+        out = []
+        for g, name in enumerate(self.segment_names):
+            for view in VIEWS:
+                kinds = {m.kind for m in self.marks if m.view == view and m.group == g}
+                for end in ("proximal", "distal"):
+                    if end not in kinds:
+                        out.append(f"{name}: {end} end missing in {view.upper()}")
+        for g in sorted({m.group for m in self.marks if m.kind == "feature"}):
+            views = {m.view for m in self.marks if m.kind == "feature" and m.group == g}
+            for view in VIEWS:
+                if view not in views:
+                    out.append(f"feature {g + 1}: partner missing in {view.upper()}")
+        return out
+
+    def load_seeds(self, seeds: Seeds) -> None:
+        """Replace the marks by those of ``seeds`` (undoable); points are not re-snapped."""
+        self._push()
+        marks: list[Mark] = []
+        next_id = 1
+
+        def add(kind: str, view: str, group: int, p: tuple[float, float]) -> None:
+            nonlocal next_id
+            pt = (float(p[0]), float(p[1]))
+            marks.append(Mark(next_id, kind, view, group, pt, pt, None))
+            next_id += 1
+
+        for g, seg in enumerate(seeds.segments):
+            for view, pts in (("a", seg.a_px), ("b", seg.b_px)):
+                add("proximal", view, g, pts[0])
+                for p in pts[1:-1]:
+                    add("waypoint", view, g, p)
+                add("distal", view, g, pts[-1])
+        for g, feat in enumerate(seeds.features):
+            add("feature", "a", g, feat.a_px)
+            add("feature", "b", g, feat.b_px)
+        self.marks = marks
+        self.segment_names = [s.name for s in seeds.segments] or ["Segment 1"]
+        self.current_segment = 0
+        self.selected_id = None
+        self._next_id = next_id
+
+    # ------------------------------------------------------------ autosave form
+    def to_dict(self) -> dict:
+        """Seeds document plus the full viewer state (incomplete marks, raw clicks)."""
+        doc = self.to_seeds().to_dict()
+        doc["viewer"] = {
+            "marks": [m.to_dict() for m in self.marks],
+            "segment_names": list(self.segment_names),
+            "current_segment": self.current_segment,
+            "mode": self.mode,
+        }
+        return doc
+
+    def restore_dict(self, doc: dict, source: str = "autosave") -> None:
+        """Inverse of :meth:`to_dict`; a plain seeds document is accepted too."""
+        viewer = doc.get("viewer") if isinstance(doc, dict) else None
+        if not isinstance(viewer, dict):
+            self.load_seeds(seeds_from_dict(doc, source=source))
+            return
+        try:
+            marks = [Mark.from_dict(m) for m in viewer["marks"]]
+            names = [str(n) for n in viewer["segment_names"]] or ["Segment 1"]
+        except (KeyError, TypeError, ValueError, IndexError) as exc:
+            raise ValueError(f"{source}: damaged viewer state ({exc})") from None
+        self._push()
+        self.marks = marks
+        self.segment_names = names
+        self.current_segment = min(int(viewer.get("current_segment", 0)), len(names) - 1)
+        if viewer.get("mode") in MODES:
+            self.mode = viewer["mode"]
+        self.selected_id = None
+        self._next_id = max((m.id for m in marks), default=0) + 1
+
+
+def pair_key(path_a: str | os.PathLike, path_b: str | os.PathLike) -> str:
+    """Stable short key of an image pair (absolute paths)."""
+    text = f"{Path(path_a).resolve()}\n{Path(path_b).resolve()}"
+    return hashlib.sha1(text.encode()).hexdigest()[:16]
+
+
+def default_autosave_path(path_a: str | os.PathLike, path_b: str | os.PathLike) -> Path:
+    """~/.cache/coronary3d/autosave/<pair key>.json (XDG_CACHE_HOME respected)."""
+    base = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
+    return base / "coronary3d" / "autosave" / f"{pair_key(path_a, path_b)}.json"
+
+
+class Autosave:
+    """Autosave file of the marks of one pair.
+
+    The file is a seeds.json document (readable by ``coronary3d reconstruct``)
+    with two extra keys: ``"pair"`` (the absolute paths of A and B) and
+    ``"viewer"`` (the full mark state).
+    """
+
+    def __init__(self, path: str | os.PathLike, path_a: str, path_b: str) -> None:
+        self.path = Path(path)
+        self.pair = [str(Path(path_a).resolve()), str(Path(path_b).resolve())]
+
+    def save(self, state: MarkState) -> None:
+        doc = state.to_dict()
+        doc["pair"] = self.pair
+        atomic_write_bytes(self.path, (json.dumps(doc, indent=2) + "\n").encode())
+
+    def load_into(self, state: MarkState, seeds_path: str | os.PathLike | None) -> bool:
+        """Restore the autosave into ``state`` if it is for this pair and newer than the seeds.
+
+        Returns True if restored. A damaged autosave is ignored (False).
+        """
+        if not self.path.is_file():
+            return False
+        if seeds_path is not None and Path(seeds_path).is_file():
+            if self.path.stat().st_mtime <= Path(seeds_path).stat().st_mtime:
+                return False
+        try:
+            doc = json.loads(self.path.read_text(encoding="utf-8"))
+        except (OSError, json.JSONDecodeError):
+            return False
+        if not isinstance(doc, dict) or doc.get("pair") != self.pair:
+            return False
+        try:
+            state.restore_dict(doc, source=str(self.path))
+        except ValueError:
+            return False
+        return True
+
