@@ -1,0 +1,247 @@
+"""Tests of recon.centerline on synthetic tubes with known centre and radius."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy import ndimage as ndi
+from scipy.spatial import cKDTree
+
+from recon.centerline import (
+    TraceError,
+    VesselnessMap,
+    compute_vesselness,
+    snap_click,
+    trace_segment,
+)
+
+DATA = Path(__file__).resolve().parents[1] / "data"
+
+
+# ------------------------------------------------------------------ helpers
+def render(
+    shape: tuple[int, int],
+    tubes: list[tuple[np.ndarray, np.ndarray]],
+    *,
+    noise: float = 0.0,
+    seed: int = 0,
+    border_px: int = 0,
+) -> np.ndarray:
+    """Beer-Lambert tubes (centre (M, 2) dense, radius (M,)) blurred by sigma 0.7 px.
+
+    I = 1000 exp(-0.08 * chord), chord = 2 sqrt(r^2 - d^2); optional black border.
+    """
+    h, w = shape
+    rr, cc = np.mgrid[0:h, 0:w]
+    pix = np.column_stack([cc.ravel(), rr.ravel()]).astype(float)
+    line = np.zeros(h * w)
+    for centre, radius in tubes:
+        d, i = cKDTree(centre).query(pix)
+        line += 2.0 * np.sqrt(np.clip(radius[i] ** 2 - d**2, 0.0, None))
+    img = ndi.gaussian_filter(1000.0 * np.exp(-0.08 * line.reshape(h, w)), 0.7)
+    if noise:
+        img = img + np.random.default_rng(seed).normal(0.0, noise, img.shape)
+    if border_px:
+        img[:border_px] = img[-border_px:] = 5.0
+        img[:, :border_px] = img[:, -border_px:] = 5.0
+    return img
+
+
+def segment(p: tuple[float, float], q: tuple[float, float], n: int = 3000) -> np.ndarray:
+    t = np.linspace(0.0, 1.0, n)[:, None]
+    return np.asarray(p, float) * (1.0 - t) + np.asarray(q, float) * t
+
+
+def arc(centre: tuple[float, float], r: float, a0: float, a1: float, n: int = 4000) -> np.ndarray:
+    t = np.linspace(a0, a1, n)
+    return np.column_stack([centre[0] + r * np.cos(t), centre[1] + r * np.sin(t)])
+
+
+def distance_to(points: np.ndarray, curve: np.ndarray) -> np.ndarray:
+    return cKDTree(curve).query(points)[0]
+
+
+# --------------------------------------------------------------- vesselness
+def test_vesselness_on_tube_not_on_border() -> None:
+    line = segment((20, 50), (100, 50))
+    img = render((100, 120), [(line, np.full(len(line), 2.5))], noise=5.0, border_px=6)
+    vmap = compute_vesselness(img)
+    assert isinstance(vmap, VesselnessMap)
+    assert vmap.response.shape == img.shape and vmap.response.dtype == np.float32
+    assert vmap.scale_px.dtype == np.float32 and vmap.valid.dtype == bool
+    assert 0.0 <= vmap.response.min() and vmap.response.max() <= 1.0
+    assert vmap.response[50, 40:80].min() > 0.5
+    assert not vmap.valid[:10].any() and not vmap.valid[:, -10:].any()
+    assert vmap.response[~vmap.valid].max() == 0.0
+    # background well away from the tube barely responds
+    assert np.percentile(vmap.response[20:35, 20:100], 99) < 0.2
+
+
+def test_vesselness_does_not_modify_input() -> None:
+    line = segment((10, 30), (50, 30))
+    img = render((60, 60), [(line, np.full(len(line), 2.0))])
+    before = img.copy()
+    compute_vesselness(img)
+    np.testing.assert_array_equal(img, before)
+
+
+# ----------------------------------------------------------------- snapping
+def test_snap_click_moves_across_not_along() -> None:
+    line = segment((10, 40), (110, 40))
+    img = render((80, 120), [(line, np.full(len(line), 3.0))], noise=5.0)
+    vmap = compute_vesselness(img)
+    snapped, dist = snap_click(vmap, (60.0, 44.0))
+    assert abs(snapped[1] - 40.0) <= 1.0
+    assert abs(snapped[0] - 60.0) <= 1.0
+    assert dist == pytest.approx(np.hypot(*(snapped - (60.0, 44.0))))
+    with pytest.raises(TraceError, match=r"px from any vessel"):
+        snap_click(vmap, (60.0, 65.0), max_distance_px=8.0)
+
+
+# ------------------------------------------------------------------ tracing
+@pytest.mark.parametrize("radius_px", [2.0, 4.0])
+def test_trace_curved_tube_centre_and_radius(radius_px: float) -> None:
+    curve = arc((100.0, 180.0), 120.0, -2.2, -0.9)
+    img = render((180, 200), [(curve, np.full(len(curve), radius_px))], noise=8.0)
+    clicks = np.array([curve[150], curve[2000] + (1.5, -1.0), curve[-150]])
+    cl = trace_segment(img, clicks, view="A")
+    d = distance_to(cl.points_px, curve)
+    assert np.sqrt(np.mean(d**2)) < 0.15
+    assert d.max() < 0.4
+    inner = slice(6, -6)
+    assert np.mean(np.abs(cl.radius_px[inner] - radius_px)) < 0.2
+    steps = np.linalg.norm(np.diff(cl.points_px, axis=0), axis=1)
+    assert np.allclose(steps, 0.5, atol=0.05)
+    # proximal to distal, ends at the clicks
+    assert np.linalg.norm(cl.points_px[0] - clicks[0]) < 1.0
+    assert np.linalg.norm(cl.points_px[-1] - clicks[-1]) < 1.0
+    assert cl.clicks_px.shape == (3, 2)
+    # brightness is the image value on the centreline: darker than the background
+    assert cl.brightness.shape == (len(cl.points_px),)
+    assert np.all(cl.brightness < 0.9 * np.median(img))
+
+
+def test_trace_stays_on_vessel_through_crossing() -> None:
+    a = segment((10, 20), (150, 110))
+    b = segment((10, 110), (150, 20))
+    img = render((130, 160), [(a, np.full(len(a), 3.0)), (b, np.full(len(b), 3.0))],
+                 noise=5.0)
+    cl = trace_segment(img, [a[200], a[-200]])
+    d = distance_to(cl.points_px, a)
+    assert d.max() < 1.0
+    assert np.sqrt(np.mean(d**2)) < 0.3
+
+
+def test_trace_follows_clicked_one_of_parallel_vessels() -> None:
+    upper = segment((10, 40), (150, 40))
+    lower = segment((10, 51), (150, 51))  # 6 px of background between the lumens
+    tubes = [(upper, np.full(len(upper), 2.5)), (lower, np.full(len(lower), 2.5))]
+    img = render((90, 160), tubes, noise=5.0)
+    for line, row in ((upper, 40.0), (lower, 51.0)):
+        cl = trace_segment(img, [(15.0, row), (80.0, row + 2.0), (145.0, row)])
+        assert distance_to(cl.points_px, line).max() < 0.4
+        assert np.mean(np.abs(cl.radius_px[6:-6] - 2.5)) < 0.2
+
+
+def test_trace_keeps_a_stenosis() -> None:
+    line = segment((10, 40), (150, 40))
+    x = line[:, 0]
+    radius = 4.0 - 2.0 * np.exp(-0.5 * ((x - 80.0) / 4.0) ** 2)  # 50 % over ~16 px
+    img = render((80, 160), [(line, radius)], noise=3.0)
+    cl = trace_segment(img, [(15.0, 40.0), (145.0, 40.0)])
+    at = cl.points_px[:, 0]
+    assert cl.radius_px[np.abs(at - 80.0) < 1.0].min() == pytest.approx(2.0, abs=0.4)
+    assert np.median(cl.radius_px[np.abs(at - 30.0) < 5.0]) == pytest.approx(4.0, abs=0.3)
+
+
+def test_reuses_vesselness_and_does_not_modify_inputs() -> None:
+    line = segment((10, 30), (90, 30))
+    img = render((60, 100), [(line, np.full(len(line), 2.5))])
+    clicks = np.array([[15.0, 30.0], [85.0, 31.0]])
+    img0, clicks0 = img.copy(), clicks.copy()
+    vmap = compute_vesselness(img)
+    cl1 = trace_segment(img, clicks, vesselness=vmap)
+    cl2 = trace_segment(img, clicks)
+    np.testing.assert_allclose(cl1.points_px, cl2.points_px)
+    np.testing.assert_array_equal(img, img0)
+    np.testing.assert_array_equal(clicks, clicks0)
+
+
+# ---------------------------------------------------------------- bad input
+@pytest.fixture(scope="module")
+def two_tubes() -> tuple[np.ndarray, VesselnessMap]:
+    left = segment((10, 30), (50, 30))
+    right = segment((90, 30), (130, 30))
+    img = render((60, 140), [(left, np.full(len(left), 2.5)), (right, np.full(len(right), 2.5))])
+    return img, compute_vesselness(img)
+
+
+@pytest.mark.parametrize(
+    ("clicks", "pattern"),
+    [
+        ([[15.0, 30.0], [200.0, 30.0]], r"^view B: click 2 \(distal end\) at \(200.0, 30.0\) is "
+                                        r"outside the 140x60 image$"),
+        ([[15.0, 30.0], [15.5, 30.0]], r"^view B: clicks 1 and 2 are 0.5 px apart"),
+        ([[15.0, 30.0]], r"^view B: need at least 2 clicks"),
+        ([[15.0, 30.0], [30.0, 50.0]], r"^view B: click 2 \(distal end\): click at \(30.0, 50.0\)"
+                                       r" is .* px from any vessel"),
+        ([[15.0, 30.0], [120.0, 30.0]], r"^view B: no vessel path between click 1 and click 2"),
+    ],
+)
+def test_bad_clicks_raise_one_line_trace_error(
+    two_tubes: tuple[np.ndarray, VesselnessMap], clicks: list, pattern: str
+) -> None:
+    img, vmap = two_tubes
+    with pytest.raises(TraceError, match=pattern) as info:
+        trace_segment(img, clicks, vesselness=vmap, view="B")
+    assert "\n" not in str(info.value)
+    assert isinstance(info.value, ValueError)
+
+
+# ---------------------------------------------------------------- real data
+REAL_CLICKS = {  # a clear tube in each view of the static phantom (col, row)
+    "IM7.dcm": [(330.0, 335.0), (205.0, 465.0)],
+    "IM8.dcm": [(215.0, 240.0), (380.0, 248.0)],
+}
+
+
+@pytest.mark.parametrize("name", sorted(REAL_CLICKS))
+def test_real_static_phantom_trace_stays_on_tube(name: str) -> None:
+    dicom_io = pytest.importorskip("recon.dicom_io")
+    if not hasattr(dicom_io, "load_angiogram"):
+        pytest.skip("recon.dicom_io.load_angiogram not written yet")
+    image = np.asarray(dicom_io.load_angiogram(DATA / name).image, dtype=float)
+    vmap = compute_vesselness(image)
+    assert vmap.response[~vmap.valid].max() == 0.0
+    assert not vmap.valid[:, :8].any() and not vmap.valid[-6:].any()  # collimator border
+    clicks = np.asarray(REAL_CLICKS[name])
+    cl = trace_segment(image, clicks, vesselness=vmap)
+    resp = ndi.map_coordinates(vmap.response, cl.points_px[:, ::-1].T, order=1)
+    assert resp.mean() > 0.5 and resp.min() > 0.3
+    assert 3.0 <= np.median(cl.radius_px) <= 12.0
+    assert np.linalg.norm(cl.points_px[0] - clicks[0]) < 3.0
+    assert np.linalg.norm(cl.points_px[-1] - clicks[-1]) < 3.0
+    # the centreline is darker than the tube's surroundings
+    assert np.median(cl.brightness) < np.median(image[vmap.valid]) - 20.0
+
+
+# ------------------------------------------------------------------ phantom
+def test_phantom_trace_matches_projected_truth() -> None:
+    phantom = pytest.importorskip("recon.phantom")
+    case = phantom.make_phantom("data2", 1, render=True)
+    X_world, radius_mm = case.truth.vessels[0]  # the whole main vessel
+    pts = case.view_a.project(X_world)
+    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(pts, axis=0), axis=1))])
+    s_dense = np.arange(0.0, s[-1], 0.05)
+    dense = np.column_stack([np.interp(s_dense, s, pts[:, 0]), np.interp(s_dense, s, pts[:, 1])])
+    radius_px = radius_mm * case.view_a.sid_mm / case.view_a.depth_mm(X_world) / float(
+        np.mean(case.view_a.pixel_spacing_mm)
+    )
+    cl = trace_segment(case.image_a, case.seeds.segments[0].a, view="A")
+    dist, nearest = cKDTree(dense).query(cl.points_px)
+    assert np.sqrt(np.mean(dist**2)) < 0.8
+    inner = slice(6, -6)  # 3 px at both ends
+    r_true = np.interp(s_dense, s, radius_px)[nearest[inner]]
+    assert np.mean(np.abs(cl.radius_px[inner] - r_true)) < 0.4
