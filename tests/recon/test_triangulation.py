@@ -1,0 +1,118 @@
+import numpy as np
+import pytest
+from test_matching import coronary_curve, projected_centerline, table1_views
+
+from recon.matching import match_centerlines
+from recon.triangulation import (
+    TriangulationError,
+    build_centerline_3d,
+    point_polyline_distance,
+    radius_mm_eq11,
+    table3_metrics,
+)
+from recon.types import Centerline2D, Matching
+
+
+def curve_length(X):
+    return float(np.linalg.norm(np.diff(X, axis=0), axis=1).sum())
+
+
+def perfect_reconstruction(name="data1", kind="tortuous"):
+    X = coronary_curve(kind)
+    va, vb = table1_views(name)
+    ca, cb = projected_centerline(X, va), projected_centerline(X, vb)
+    m = match_centerlines(ca, cb, va, vb, method="match3")
+    return X, va, vb, m, build_centerline_3d(m, va, vb)
+
+
+def test_point_polyline_distance():
+    poly = np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 10.0]])
+    pts = np.array([[5.0, 3.0], [12.0, 5.0], [-3.0, -4.0], [10.0, 10.0]])
+    assert np.allclose(point_polyline_distance(pts, poly), [3.0, 2.0, 5.0, 0.0])
+    assert np.allclose(point_polyline_distance(pts, poly, chunk=1), [3.0, 2.0, 5.0, 0.0])
+
+
+@pytest.mark.parametrize("name", ["data1", "data2", "data3"])
+def test_perfect_data_reconstructs_the_curve(name):
+    X, va, vb, m, cl = perfect_reconstruction(name)
+    assert np.sqrt(np.mean(point_polyline_distance(cl.X_world, X) ** 2)) < 0.05
+    assert abs(cl.length_mm - curve_length(X)) < 0.005 * curve_length(X)
+    assert np.allclose(np.diff(cl.s_mm), cl.s_mm[1] - cl.s_mm[0])
+    assert abs(cl.s_mm[1] - 0.25) < 0.01
+    assert np.allclose(np.linalg.norm(cl.tangents, axis=1), 1.0)
+    chords = np.diff(cl.X_world, axis=0)
+    chords /= np.linalg.norm(chords, axis=1, keepdims=True)
+    assert np.median(np.einsum("nd,nd->n", chords, cl.tangents[:-1])) > 0.999
+    assert cl.X_raw_world.shape == (len(m.points_a_px), 3)
+    assert np.array_equal(cl.points_a_px, m.points_a_px)
+    # ends stay at the truth's ends (proximal first)
+    assert np.linalg.norm(cl.X_world[0] - X[0]) < 0.3
+    assert np.linalg.norm(cl.X_world[-1] - X[-1]) < 0.3
+
+
+def test_table3_is_zero_for_perfect_data():
+    _, va, vb, m, cl = perfect_reconstruction("data2")
+    t3 = table3_metrics(cl, m, va, vb)
+    for view in ("a", "b"):
+        assert t3[view]["rms_px"] < 0.05 and t3[view]["max_px"] < 0.2
+        assert np.isclose(t3[view]["mean_mm"], t3[view]["mean_px"] * 0.3)
+        assert t3[view]["n"] == len(m.centerline_a.points_px)
+    assert t3["ray_distance_mean_mm"] < 0.01
+    assert t3["backprojection_rms_mm"] < 0.015
+
+
+def test_table3_sees_a_miscalibration():
+    _, va, vb, m, cl = perfect_reconstruction("data2")
+    vb_bad = vb.with_correction([0.0, 0.0, 0.0], [0.0, 0.0, 2.0])
+    t3 = table3_metrics(cl, m, va, vb_bad)
+    assert t3["b"]["mean_mm"] > 1.0
+    assert t3["ray_distance_mean_mm"] > 1.0
+
+
+def test_eq11_cylinder_radius_at_known_depth():
+    _, vb = table1_views("data1")
+    va = table1_views("data3")[0]
+    R = vb.R_view_from_world  # rows u, v, d of view B
+    # a straight cylinder of radius 1.5 mm, 40 mm nearer the source than the isocenter
+    centre = -40.0 * R[2]
+    axis = (R[0] + 0.3 * R[1]) / np.linalg.norm(R[0] + 0.3 * R[1])
+    X = centre + np.linspace(-20, 20, 400)[:, None] * axis
+    radius_mm = 1.5
+
+    def traced(view):
+        # the projected half-width, measured from the two silhouette points
+        ray = X - view.source_world
+        ray /= np.linalg.norm(ray, axis=1, keepdims=True)
+        side = np.cross(ray, axis)
+        side /= np.linalg.norm(side, axis=1, keepdims=True)
+        half = np.linalg.norm(
+            view.project(X + radius_mm * side) - view.project(X - radius_mm * side), axis=1
+        ) / 2.0
+        return Centerline2D(points_px=view.project(X), radius_px=half, brightness=np.ones(400))
+
+    ca, cb = traced(va), traced(vb)
+    m = match_centerlines(ca, cb, va, vb, method="match3")
+    cl = build_centerline_3d(m, va, vb)
+    assert np.allclose(cl.radius_a_mm, radius_mm, rtol=0.01)
+    assert np.allclose(cl.radius_b_mm, radius_mm, rtol=0.01)
+    assert np.allclose(cl.radius_mm, radius_mm, rtol=0.01)
+    # and the isocenter magnification would be wrong by several percent here
+    naive = cb.radius_px[200] * 0.3 * vb.sod_mm / vb.sid_mm
+    assert abs(naive - radius_mm) > 0.04 * radius_mm
+
+
+def test_radius_eq11_formula():
+    _, vb = table1_views("data2")
+    X = np.array([[0.0, 0.0, 0.0], [10.0, -20.0, 5.0]])
+    r = radius_mm_eq11([10.0, 10.0], X, vb)
+    assert np.isclose(r[0], 10.0 * 0.3 * vb.sod_mm / vb.sid_mm)  # isocenter: SOD / SID
+    d = vb.depth_mm(X[1:])[0]
+    assert np.isclose(r[1], 10.0 * 0.3 * d / vb.sid_mm)  # same ratio along any ray
+
+
+def test_too_few_pairs():
+    cl = Centerline2D(np.zeros((3, 2)) + [[0, 0], [1, 0], [2, 0]], np.ones(3), np.ones(3))
+    m = Matching("match1", cl.points_px, cl.points_px, np.arange(3), np.arange(3), cl, cl, "a")
+    va, vb = table1_views("data1")
+    with pytest.raises(TriangulationError):
+        build_centerline_3d(m, va, vb)
