@@ -99,6 +99,9 @@ def epipolar_weights(
     return np.maximum(sin_phi**2, min_weight)
 
 
+SMOOTHING_MM = 1.1
+
+
 def build_centerline_3d(
     matching: Matching,
     view_a: ViewGeometry,
@@ -107,6 +110,7 @@ def build_centerline_3d(
     spacing_mm: float = 0.25,
     method: str = "paper",
     lam: float | None = None,
+    smoothing_mm: float = SMOOTHING_MM,
     weighted: bool = True,
     min_weight: float = 0.02,
 ) -> Centerline3D:
@@ -118,7 +122,13 @@ def build_centerline_3d(
     view_a, view_b : the views the matching was made with (B calibrated).
     spacing_mm : arc-length spacing of the output points.
     method : triangulation, "paper" (eqs. 2-3) or "dlt".
-    lam : smoothing-spline penalty; None chooses it by GCV.
+    lam : smoothing-spline penalty; None derives it from ``smoothing_mm``.
+    smoothing_mm : bandwidth of the smoothing spline along the vessel. The
+        penalty is lam = (points per mm) * smoothing_mm**4 (a cubic smoothing
+        spline's equivalent kernel width scales as (lam / density)^(1/4)).
+        Measured on the phantoms (`coronary3d bench reconstruct`): ~1 mm
+        removes the depth noise that inflated the length by 1-4 % under GCV,
+        keeps a 6 mm stenosis, and costs ~5 ms instead of 200-500 ms for GCV.
     weighted : weight each raw point by its conditioning, sin^2 of the angle
         between the vessel and the epipolar plane (see :func:`epipolar_weights`);
         a trace error of d px moves the point by about d / sin(angle).
@@ -144,6 +154,8 @@ def build_centerline_3d(
     if len(t_k) < 4 or t_k[-1] <= 0:
         raise TriangulationError("the matched pairs collapse to a point in 3D")
     w = epipolar_weights(X_k, view_a, view_b, min_weight=min_weight) if weighted else None
+    if lam is None:
+        lam = len(t_k) / t_k[-1] * smoothing_mm**4
     spline = make_smoothing_spline(t_k, X_k, w=w, lam=lam)
 
     # uniform arc length of the smoothed curve, from a dense sampling

@@ -878,14 +878,19 @@ class ViewerApp:
         g = self._gui
         label_to_mode = {v: k for k, v in MODE_LABELS.items()}
 
+        # The mode, segment and selection widgets mirror the state. Setting them from
+        # Python fires these callbacks later on viser's event loop (client None), when
+        # the value read may already be stale: only a user's change may act.
         @g["mode"].on_update
         async def _(event: viser.GuiEvent) -> None:
+            if event.client is None:
+                return
             with self._lock:
                 self.state.set_mode(label_to_mode[g["mode"].value])
 
         @g["segment"].on_update
         async def _(event: viser.GuiEvent) -> None:
-            if self._refreshing:
+            if self._refreshing or event.client is None:
                 return
             with self._lock:
                 names = self.state.segment_names
@@ -898,7 +903,7 @@ class ViewerApp:
 
         @g["select"].on_update
         async def _(event: viser.GuiEvent) -> None:
-            if self._refreshing:
+            if self._refreshing or event.client is None:
                 return
             value = g["select"].value
             mark_id = None if value == "(none)" else int(value.split("#")[-1])

@@ -17,12 +17,37 @@ def curve_length(X):
     return float(np.linalg.norm(np.diff(X, axis=0), axis=1).sum())
 
 
-def perfect_reconstruction(name="data1", kind="tortuous"):
+def perfect_reconstruction(name="data1", kind="tortuous", smoothing_mm=0.1):
+    """Noise-free data, lightly smoothed: the reconstruction must be exact."""
     X = coronary_curve(kind)
     va, vb = table1_views(name)
     ca, cb = projected_centerline(X, va), projected_centerline(X, vb)
     m = match_centerlines(ca, cb, va, vb, method="match3")
-    return X, va, vb, m, build_centerline_3d(m, va, vb)
+    return X, va, vb, m, build_centerline_3d(m, va, vb, smoothing_mm=smoothing_mm)
+
+
+def test_default_smoothing_keeps_shape_and_removes_noise_length():
+    X, va, vb, m, _ = perfect_reconstruction("data1", kind="gentle")
+    clean = build_centerline_3d(m, va, vb)  # default smoothing on perfect data: small bias
+    assert np.sqrt(np.mean(point_polyline_distance(clean.X_world, X) ** 2)) < 0.1
+    assert abs(clean.length_mm - curve_length(X)) < 0.003 * curve_length(X)
+    rng = np.random.default_rng(1)
+    noisy = Matching(
+        method=m.method,
+        points_a_px=m.points_a_px + rng.normal(0, 0.5, m.points_a_px.shape),
+        points_b_px=m.points_b_px + rng.normal(0, 0.5, m.points_b_px.shape),
+        index_a=m.index_a,
+        index_b=m.index_b,
+        centerline_a=m.centerline_a,
+        centerline_b=m.centerline_b,
+        standard_view=m.standard_view,
+    )
+    light = build_centerline_3d(noisy, va, vb, smoothing_mm=0.2)
+    default = build_centerline_3d(noisy, va, vb)
+    true_length = curve_length(X)
+    # Depth noise inflates the length of a lightly smoothed curve; the default does not.
+    assert light.length_mm - true_length > abs(default.length_mm - true_length)
+    assert abs(default.length_mm - true_length) < 0.005 * true_length
 
 
 def test_point_polyline_distance():
