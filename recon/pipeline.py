@@ -328,15 +328,19 @@ def _self_calibrate(
     # Refinement over the matched centerline (about one pair per 4 px of vessel,
     # robust Huber loss, priors centred on the header).
     stride = max(1, len(matching.points_a_px) // 100)
-    cal = refine_with_matches(
-        view_a,
-        view_b_header,
-        feat_a,
-        feat_b,
-        matching.points_a_px[::stride],
-        matching.points_b_px[::stride],
-        initial=cal,
-    )
+    matched_a, matched_b = matching.points_a_px[::stride], matching.points_b_px[::stride]
+    if options.optimizer == "palm":
+        cal = refine_with_matches(
+            view_a, view_b_header, feat_a, feat_b, matched_a, matched_b, initial=cal
+        )
+    else:  # the baselines have no robust loss: plain least squares on the same points
+        cal = calibrate(
+            view_a,
+            view_b_header,
+            np.vstack([feat_a, matched_a]),
+            np.vstack([feat_b, matched_b]),
+            method=options.optimizer,
+        )
     steps.append(_step("matched points", cal))
     matching = match_centerlines(cl_a, cl_b, view_a, cal.view_b, method=options.matcher)
     return cal, matching, steps

@@ -217,6 +217,7 @@ def _error_stats(dist_px: FloatArray, pixel_mm: float) -> dict:
         "min_px": float(dist_px.min()),
         "mean_px": float(dist_px.mean()),
         "rms_px": float(np.sqrt(np.mean(dist_px**2))),
+        "median_px": float(np.median(dist_px)),  # not in the paper: robust to a short bad stretch
     }
     stats.update({k.replace("_px", "_mm"): v * pixel_mm for k, v in list(stats.items())})
     stats["n"] = int(len(dist_px))

@@ -95,6 +95,8 @@ def evaluate_case(case: PhantomCase, options: ReconstructionOptions) -> dict:
         "pose_displacement_mm_after": disp_after,
         "backprojection_rms_px_a": rec.metrics["a"]["rms_px"],
         "backprojection_rms_px_b": rec.metrics["b"]["rms_px"],
+        "backprojection_median_px_a": rec.metrics["a"]["median_px"],
+        "backprojection_median_px_b": rec.metrics["b"]["median_px"],
         "wall_ms": wall_ms,
         "timings_ms": rec.timings_ms,
     }
