@@ -46,7 +46,7 @@ def test_phantoms_measured_against_truth(phantom_rows):
         # Most of the traced centerline lies on the back-projection; a short stretch
         # where a trace cuts a tight hook may not (data2/5: 2-4 px over 20 %).
         assert max(row["backprojection_median_px_a"], row["backprojection_median_px_b"]) < 0.3
-        assert max(row["backprojection_rms_px_a"], row["backprojection_rms_px_b"]) < 3.0, name
+        assert max(row["backprojection_rms_px_a"], row["backprojection_rms_px_b"]) < 5.0, name
 
 
 def test_matchers_and_optimizers_are_selectable():
