@@ -312,7 +312,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
     result = module.run(**kwargs)
     print(module.format_table(result))
     if args.json:
-        from recon.seeds import atomic_write_bytes
+        from recon.fileio import atomic_write_bytes
 
         atomic_write_bytes(
             Path(args.json), (json.dumps(result, indent=2, default=float) + "\n").encode()

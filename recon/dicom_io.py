@@ -49,7 +49,6 @@ Fallbacks, each recorded in ``Angiogram.geometry_notes``:
 from __future__ import annotations
 
 import io
-import json
 import math
 import os
 import tempfile
@@ -68,6 +67,7 @@ from pydicom.encaps import encapsulate
 from pydicom.uid import UID, ExplicitVRLittleEndian, generate_uid
 from scipy import ndimage
 
+from recon.fileio import read_json
 from recon.geometry import ViewGeometry
 
 __all__ = [
@@ -193,17 +193,11 @@ class GeometryOverrides:
 
 
 def _read_json(path: str | os.PathLike) -> dict:
-    p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise LoadError(f"{p}: cannot read the geometry JSON ({exc.strerror or exc})") from None
-    try:
-        data = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise LoadError(f"{p}: not valid JSON (line {exc.lineno}: {exc.msg})") from None
+    data = read_json(path, LoadError, "geometry JSON")
     if not isinstance(data, dict):
-        raise LoadError(f"{p}: the geometry JSON must be an object with keys {_GEOMETRY_KEYS}")
+        raise LoadError(
+            f"{Path(path)}: the geometry JSON must be an object with keys {_GEOMETRY_KEYS}"
+        )
     return data
 
 
@@ -815,14 +809,9 @@ def load_angiogram(
         undecodable files, a frame out of range, or missing geometry.
     """
     path_str = os.fspath(path)
-    json_str = os.fspath(geometry_json) if geometry_json is not None else None
-    raw = _read_any(path_str, json_str)
-    if json_str is not None and raw.info["format"] == "dicom":
-        overrides = (overrides or GeometryOverrides()).merged_over(
-            GeometryOverrides.from_json(json_str)
-        )
-    index, reason = _choose_frame(raw, frame, path_str)
-    values, notes, problems = _resolve_geometry(raw, overrides)
+    raw, index, reason, values, notes, problems = _read_and_resolve(
+        path_str, frame, overrides, geometry_json
+    )
     geometry = _geometry(raw, values, problems, path_str)
     n = raw.frames.shape[0]
     return Angiogram(
@@ -837,6 +826,27 @@ def load_angiogram(
         geometry_notes=tuple(notes),
         info=dict(raw.info),
     )
+
+
+def _read_and_resolve(
+    path_str: str,
+    frame: int | None,
+    overrides: GeometryOverrides | None,
+    geometry_json: str | os.PathLike | None,
+) -> tuple:
+    """Read a file, choose its frame and resolve its geometry (shared by load and describe).
+
+    A geometry JSON given for a DICOM file acts as overrides, under the explicit ones.
+    """
+    json_str = os.fspath(geometry_json) if geometry_json is not None else None
+    raw = _read_any(path_str, json_str)
+    if json_str is not None and raw.info["format"] == "dicom":
+        overrides = (overrides or GeometryOverrides()).merged_over(
+            GeometryOverrides.from_json(json_str)
+        )
+    index, reason = _choose_frame(raw, frame, path_str)
+    values, notes, problems = _resolve_geometry(raw, overrides)
+    return raw, index, reason, values, notes, problems
 
 
 def describe_file(
@@ -854,14 +864,9 @@ def describe_file(
     Patient name and ID are included only when ``show_patient``.
     """
     path_str = os.fspath(path)
-    json_str = os.fspath(geometry_json) if geometry_json is not None else None
-    raw = _read_any(path_str, json_str)
-    if json_str is not None and raw.info["format"] == "dicom":
-        overrides = (overrides or GeometryOverrides()).merged_over(
-            GeometryOverrides.from_json(json_str)
-        )
-    index, reason = _choose_frame(raw, frame, path_str)
-    values, notes, problems = _resolve_geometry(raw, overrides)
+    raw, index, reason, values, notes, problems = _read_and_resolve(
+        path_str, frame, overrides, geometry_json
+    )
     geometry = {k: (list(v) if isinstance(v, tuple) else v) for k, v in values.items()}
     info = raw.info
     desc: dict[str, Any] = {

@@ -70,8 +70,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import ndimage
 
+from recon.fileio import atomic_write_bytes
 from recon.geometry import ViewGeometry, rotation_from_rotvec, rotvec_from_rotation
-from recon.seeds import Feature, Seeds, Segment, atomic_write_bytes, save_seeds
+from recon.seeds import Feature, Seeds, Segment, save_seeds
 
 __all__ = [
     "PhantomPreset",

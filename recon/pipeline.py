@@ -25,10 +25,11 @@ from recon import __version__
 from recon.calibration import CalibrationResult, calibrate, refine_with_matches
 from recon.centerline import compute_vesselness, trace_segment
 from recon.dicom_io import Angiogram
+from recon.fileio import atomic_write_bytes
 from recon.geometry import ViewGeometry, view_separation_deg
 from recon.matching import match_centerlines
 from recon.measure import LumenProfile, Measurements, lumen_profile, measure_lumen
-from recon.seeds import Seeds, atomic_write_bytes
+from recon.seeds import Seeds
 from recon.surface import SurfaceResult, build_surface, export_mesh
 from recon.triangulation import build_centerline_3d, table3_metrics
 from recon.types import Centerline2D, Centerline3D, Matching

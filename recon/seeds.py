@@ -16,14 +16,24 @@ from __future__ import annotations
 import json
 import math
 import os
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["Segment", "Feature", "Seeds", "SeedsError", "load_seeds", "save_seeds"]
+from recon.fileio import atomic_write_bytes, read_json
+
+__all__ = [
+    "Segment",
+    "Feature",
+    "Seeds",
+    "SeedsError",
+    "load_seeds",
+    "save_seeds",
+    "seeds_from_dict",
+    "atomic_write_bytes",
+]
 
 
 class SeedsError(ValueError):
@@ -142,34 +152,9 @@ def seeds_from_dict(data: object, source: str = "seeds") -> Seeds:
 
 def load_seeds(path: str | os.PathLike) -> Seeds:
     """Read and validate a seeds.json file. Raises SeedsError naming the file."""
-    p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise SeedsError(f"{p}: cannot read ({exc.strerror or exc})") from None
-    try:
-        data = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise SeedsError(f"{p}: not valid JSON (line {exc.lineno}: {exc.msg})") from None
-    return seeds_from_dict(data, source=str(p))
+    return seeds_from_dict(read_json(path, SeedsError, "seeds file"), source=str(Path(path)))
 
 
 def save_seeds(seeds: Seeds, path: str | os.PathLike) -> None:
     """Write seeds atomically (temporary file in the same folder, then rename)."""
     atomic_write_bytes(Path(path), (json.dumps(seeds.to_dict(), indent=2) + "\n").encode())
-
-
-def atomic_write_bytes(path: Path, data: bytes) -> None:
-    """Write ``data`` to ``path`` through a temporary file and an atomic rename."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; give the usual file mode
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
