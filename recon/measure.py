@@ -240,6 +240,9 @@ def lumen_profile(
     )
 
 
+END_MARGIN_MM = 2.0
+
+
 def measure_lumen(profile: LumenProfile) -> Measurements:
     """3D QCA: MLD, reference, % stenosis, lesion extent (definitions in the module doc).
 
@@ -255,7 +258,13 @@ def measure_lumen(profile: LumenProfile) -> Measurements:
     d = profile.diameter_smooth_mm
     ref = profile.reference_diameter_mm
     deficit = 1.0 - d / ref
-    peak = int(np.argmax(deficit))
+    # The clicked ends lie on healthy vessel; the first and last END_MARGIN_MM are
+    # where a trace starts or fades, so the lesion's peak is not sought there
+    # (unless the segment is too short to leave anything).
+    search = (s >= s[0] + END_MARGIN_MM) & (s <= s[-1] - END_MARGIN_MM)
+    if not np.any(search):
+        search[:] = True
+    peak = int(np.flatnonzero(search)[np.argmax(deficit[search])])
     if deficit[peak] >= profile.threshold_rel:
         start, end = _lesion_extent(s, deficit, peak)
         inside = (s >= start) & (s <= end)

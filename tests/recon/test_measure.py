@@ -115,3 +115,12 @@ def test_profile_from_elliptic_sections_of_a_straight_vessel():
 def test_bad_profiles_raise_value_error(s, area):
     with pytest.raises(ValueError):
         lumen_profile(s, area)
+
+
+def test_a_fading_trace_end_is_not_taken_for_the_lesion():
+    s, radius, _ = cosine_profile(p=0.4, length_mm=8.0, s0=45.0)
+    faded = radius.copy()
+    faded[s > s[-1] - 1.0] *= 0.5  # the last millimetre: where the trace fades out
+    m = measure_lumen(lumen_profile(s, np.pi * faded**2))
+    assert abs(m.mld_s_mm - 45.0) < 1.0
+    assert m.lesion_end_s_mm < s[-1] - 10.0
