@@ -113,6 +113,15 @@ def _convex_fill(mask: NDArray[np.bool_]) -> NDArray[np.bool_]:
     return out.astype(bool)
 
 
+def _parabola_vertex_offset(f0: NDArray, f1: NDArray, f2: NDArray) -> NDArray:
+    """Offset in [-0.5, 0.5] samples of the vertex of the parabola through three
+    equally spaced values around a discrete minimum (0 where it is not convex)."""
+    with np.errstate(invalid="ignore", divide="ignore"):
+        denom = f0 - 2.0 * f1 + f2
+        delta = np.where(np.isfinite(denom) & (denom > 0), 0.5 * (f0 - f2) / denom, 0.0)
+    return np.clip(np.nan_to_num(delta), -0.5, 0.5)
+
+
 def compute_vesselness(
     image: ArrayLike, *, sigmas_px: tuple[float, ...] = (1.0, 1.5, 2.0, 3.0, 4.0)
 ) -> VesselnessMap:
@@ -309,11 +318,7 @@ def _fit_profiles(
     best = np.argmin(rss, axis=1)
     m = np.arange(len(profiles))
     i = np.clip(best, 1, len(radii) - 2)
-    f0, f1, f2 = rss[m, i - 1], rss[m, i], rss[m, i + 1]
-    with np.errstate(invalid="ignore", divide="ignore"):
-        denom = f0 - 2.0 * f1 + f2
-        delta = np.where(np.isfinite(denom) & (denom > 0), 0.5 * (f0 - f2) / denom, 0.0)
-    delta = np.clip(np.nan_to_num(delta), -0.5, 0.5)
+    delta = _parabola_vertex_offset(rss[m, i - 1], rss[m, i], rss[m, i + 1])
     radius = radii[i] + delta * (radii[1] - radii[0])
     radius = np.where(best == i, radius, radii[best])
     return rss[m, best], radius, coef[m, best, 2]
@@ -387,11 +392,7 @@ def _fit_along(
         rss_out[sel] = rss[j, k] / (len(offsets) - 4)
         if len(shifts_px) >= 3:  # parabolic refinement of the shift
             kk = np.clip(k, 1, len(shifts_px) - 2)
-            f0, f1, f2 = rss[j, kk - 1], rss[j, kk], rss[j, kk + 1]
-            with np.errstate(invalid="ignore", divide="ignore"):
-                denom = f0 - 2.0 * f1 + f2
-                d = np.where(np.isfinite(denom) & (denom > 0), 0.5 * (f0 - f2) / denom, 0.0)
-            d = np.clip(np.nan_to_num(d), -0.5, 0.5)
+            d = _parabola_vertex_offset(rss[j, kk - 1], rss[j, kk], rss[j, kk + 1])
             step = shifts_px[1] - shifts_px[0]
             shift_out[sel] = np.where(kk == k, shifts_px[kk] + d * step, shifts_px[k])
     ok = np.isfinite(rss_out) & np.isfinite(radius_out)

@@ -16,14 +16,14 @@ import io
 import json
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from recon import __version__
 from recon.calibration import CalibrationResult, calibrate, refine_with_matches
-from recon.centerline import compute_vesselness, trace_segment
+from recon.centerline import VesselnessMap, compute_vesselness, trace_segment
 from recon.dicom_io import Angiogram
 from recon.fileio import atomic_write_bytes
 from recon.geometry import ViewGeometry, view_separation_deg
@@ -208,6 +208,7 @@ def reconstruct_pair(
     seeds: Seeds,
     options: ReconstructionOptions | None = None,
     progress: Progress | None = None,
+    vesselness: tuple[VesselnessMap, VesselnessMap] | None = None,
 ) -> Reconstruction:
     """Run every stage on one segment of a pair of angiograms.
 
@@ -216,6 +217,8 @@ def reconstruct_pair(
     angio_a, angio_b : the reference view A and view B (header geometry).
     seeds : the clinician's clicks; ``options.segment`` selects the segment.
     progress : called as ``progress(stage, fraction)`` before each stage.
+    vesselness : the two images' vesselness maps when the caller already has
+        them (the viewer computes them once per image for snapping).
     """
     options = options or ReconstructionOptions()
     seg = _segment(seeds, options.segment)
@@ -231,10 +234,10 @@ def reconstruct_pair(
 
     # 1. Vessel centerline, radius and brightness in each view (sec. 3.3.1).
     _notify(progress, "tracing the vessel in both views", 0.0)
-    cl_a = trace_segment(angio_a.image, seg.a, vesselness=compute_vesselness(angio_a.image),
-                         view="A")
-    cl_b = trace_segment(angio_b.image, seg.b, vesselness=compute_vesselness(angio_b.image),
-                         view="B")
+    if vesselness is None:
+        vesselness = (compute_vesselness(angio_a.image), compute_vesselness(angio_b.image))
+    cl_a = trace_segment(angio_a.image, seg.a, vesselness=vesselness[0], view="A")
+    cl_b = trace_segment(angio_b.image, seg.b, vesselness=vesselness[1], view="B")
     lap("trace")
 
     # 2. Calibrate view B on the corresponding features (eq. 5, PALM).
@@ -410,8 +413,3 @@ def _json_default(value: object) -> object:
     if isinstance(value, tuple):
         return list(value)
     return str(value)
-
-
-def with_options(options: ReconstructionOptions, **changes: object) -> ReconstructionOptions:
-    """A copy of ``options`` with some fields changed (for benches and the viewer)."""
-    return replace(options, **changes)

@@ -576,9 +576,11 @@ class ViewerApp:
 
             with self._lock:
                 seeds, segment = self._seeds_for_run()
-                a, b = self.views["a"].angio, self.views["b"].angio
+                view_a, view_b = self.views["a"], self.views["b"]
             options = ReconstructionOptions(matcher="match3", optimizer="palm", segment=segment)
-            rec = reconstruct_pair(a, b, seeds, options, progress=progress)
+            maps = (view_a.get_vesselness(), view_b.get_vesselness())  # cached for snapping
+            rec = reconstruct_pair(view_a.angio, view_b.angio, seeds, options,
+                                   progress=progress, vesselness=maps)
             with self._lock:
                 self.reconstruction = rec
                 self.calibration = rec.calibration
