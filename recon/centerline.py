@@ -5,8 +5,11 @@ Pipeline of :func:`trace_segment` (one segment, one view)::
     vesselness (Hessian, Frangi)  ->  snap clicks to the ridge
       ->  minimal-cost path through the snapped clicks
       ->  subpixel centre and radius from intensity profiles across the vessel
-          (least-squares fit of a blurred Beer-Lambert cylinder)
-      ->  smoothing B-spline at uniform arc length (the paper's NURBS, sec. 3.3.1)
+          (least-squares fit of a blurred Beer-Lambert cylinder), iterated with
+          normals from the re-centred curve; each fit is weighted by its
+          reliability (residual and radius consistency: overlaps are bridged)
+      ->  weighted smoothing B-spline at uniform arc length (the paper's NURBS,
+          sec. 3.3.1)
       ->  radius (N,) and brightness (N,) at every point (brightness feeds eq. (7)).
 
 Pixels are (col, row), 0-based; images are MONOCHROME2 (vessels dark).
@@ -46,6 +49,17 @@ _COARSE_SIGMA_PX = 0.4
 _FINE_SIGMA_PX = 0.12
 _MAX_SHIFT_PX = 2.0
 _SHIFT_STEP_PX = 0.5
+#: Passes of (fit across the vessel -> re-centre the curve -> new normals), at most.
+_N_REFINE = 4
+#: Consecutive fits (1 px apart) at the search limit, one way, that count as a cut corner.
+_MIN_LIMIT_RUN = 5
+#: Running-median window (points, 1 px apart) of the reference radius; longer than an
+#: overlap, so an overlap fitted as one wide tube stands out against it.
+_REF_WINDOW_PX = 121
+#: A fit wider than the reference radius by more than this fraction loses weight.
+_RADIUS_TOL = 0.15
+#: A fit whose residual variance exceeds this many times the trace's median loses weight.
+_RSS_TOL = 3.0
 
 
 class TraceError(ValueError):
@@ -423,22 +437,60 @@ def _smooth_spline(
 ) -> FloatArray:
     """Smoothing cubic B-spline through noisy points (N, 2), at uniform arc length.
 
-    The smoothing factor is the expected residual: s = N * sigma_px^2 (splprep);
-    ``weights`` (N,) are relative confidences (1 = a clean profile).
+    The smoothing factor is the expected weighted residual: s = sum(w^2) sigma_px^2
+    (splprep); ``weights`` (N,) are relative confidences in (0, 1] (1 = a clean
+    profile; a point of weight w may lie sigma_px / w from the curve).
     """
     keep = np.concatenate([[True], np.linalg.norm(np.diff(points_px, axis=0), axis=1) > 1e-6])
     pts = points_px[keep]
     if len(pts) < 4:
         return _resample_uniform(pts, spacing_px)
-    weights = np.ones(len(pts)) if weights is None else np.asarray(weights, float)[keep]
+    weights = np.ones(len(pts)) if weights is None else np.array(weights, float)[keep]
     weights[[0, -1]] = 10.0  # pin the ends at the (refined) end clicks
-    tck, _ = splprep([pts[:, 0], pts[:, 1]], w=weights, s=len(pts) * sigma_px**2, k=3)
+    s_total = float(np.sum(np.minimum(weights, 1.0) ** 2)) * sigma_px**2
+    tck, _ = splprep([pts[:, 0], pts[:, 1]], w=weights, s=s_total, k=3)
     u_dense = np.linspace(0.0, 1.0, max(8 * len(pts), 64))
     dense = np.column_stack(splev(u_dense, tck))
     s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(dense, axis=0), axis=1))])
     n = max(int(round(s[-1] / spacing_px)) + 1, 2)
     u_new = np.interp(np.linspace(0.0, s[-1], n), s, u_dense)
     return np.column_stack(splev(u_new, tck))
+
+
+def _reliability(radius_px: FloatArray, rss: FloatArray, fitted: NDArray[np.bool_]) -> FloatArray:
+    """Confidence (N,) in (0, 1] of each profile fit along a trace.
+
+    A profile that is not one clean tube (an overlapping, touching or branching
+    vessel) fits with a larger residual variance than the trace's typical one, or
+    as a tube wider than the vessel's running reference radius. Each cause divides
+    the weight; a clean profile has weight 1.
+    """
+    w = np.full(len(rss), 1e-3)
+    if not np.any(fitted):
+        return w
+    rss_ref = float(np.median(rss[fitted]))
+    r_fit = np.interp(np.arange(len(rss)), np.nonzero(fitted)[0], radius_px[fitted])
+    n_win = max(int(_REF_WINDOW_PX) | 1, 3)
+    r_ref = ndi.median_filter(r_fit, size=n_win, mode="nearest")
+    excess = np.clip(r_fit / np.maximum(r_ref, 1e-6) - 1.0 - _RADIUS_TOL, 0.0, None)
+    ratio = np.clip(rss / max(_RSS_TOL * rss_ref, 1e-30) - 1.0, 0.0, None)
+    w_fit = 1.0 / (1.0 + ratio) / (1.0 + (excess / 0.1) ** 2)
+    return np.where(fitted, np.clip(w_fit, 1e-3, 1.0), 1e-3)
+
+
+def _limit_runs(shift_px: FloatArray, min_run: int = _MIN_LIMIT_RUN) -> FloatArray:
+    """1.0 where the shift (N,) is at the search limit in a run of at least
+    ``min_run`` consecutive points with the same sign, else 0.0."""
+    sign = np.where(np.abs(shift_px) >= _MAX_SHIFT_PX - 1e-9, np.sign(shift_px), 0.0)
+    out = np.zeros(len(shift_px))
+    for value in (-1.0, 1.0):
+        labels, n = ndi.label(sign == value)
+        if n:
+            sizes = np.bincount(labels.ravel())
+            long_run = sizes >= min_run
+            long_run[0] = False
+            out[long_run[labels]] = 1.0
+    return out
 
 
 def _click_role(i: int, k: int) -> str:
@@ -580,22 +632,39 @@ def trace_segment(
     origin = np.array([c0, r0], dtype=float)
     absorb = _absorption(img[r0 : int(r1), c0 : int(c1)])
     # Pass 1: a coarse smooth curve through the pixel path, then subpixel centres
-    # from the profile fit over shifts along the normal.
+    # from the profile fit over shifts along the normal, iterated: each pass
+    # re-centres the curve on the fitted centres (weighted by their reliability, so
+    # an overlap is bridged from the clean profiles on either side) and refits with
+    # the new curve's normals, until the trusted shifts are all below 0.3 px.
     coarse = _smooth_spline(path_px, _COARSE_SIGMA_PX, 1.0)
-    normals = _unit_normals(coarse)
     scale = ndi.map_coordinates(vmap.scale_px, [coarse[:, 1], coarse[:, 0]], order=0,
                                 mode="nearest")
     r_guess = np.clip(1.6 * scale + 0.5, 1.0, 14.0)
     shifts = np.arange(-_MAX_SHIFT_PX, _MAX_SHIFT_PX + 1e-4, _SHIFT_STEP_PX)
-    shift, radius1, ok, _ = _fit_along(
-        absorb, coarse - origin, normals, r_guess, shifts, blur_px, 0.25
-    )
+    for it in range(_N_REFINE):
+        normals = _unit_normals(coarse)
+        shift, radius1, ok, rss = _fit_along(
+            absorb, coarse - origin, normals, r_guess, shifts, blur_px, 0.25
+        )
+        fitted = np.isfinite(rss) & np.isfinite(radius1)
+        fitted[[0, -1]] = True
+        weight = _reliability(radius1, rss, fitted)
+        refined = coarse + shift[:, None] * normals
+        trusted = fitted & (weight > 0.5)
+        if it == _N_REFINE - 1 or not np.any(np.abs(shift[trusted]) >= 0.3):
+            break
+        # A run of fits at the search limit, all one way, is a curve off the centre
+        # (a cut corner), not a neighbour: follow it so the next pass can resolve it.
+        pull = np.where(weight > 0.5, weight, np.maximum(weight, 0.5 * _limit_runs(shift)))
+        coarse = _smooth_spline(refined[fitted], _COARSE_SIGMA_PX, 1.0, pull[fitted])
+        r_guess = np.interp(np.linspace(0, 1, len(coarse)), np.linspace(0, 1, int(fitted.sum())),
+                            np.nan_to_num(radius1[fitted], nan=2.0))
+        r_guess = np.clip(r_guess, 1.0, 14.0)
     ok[[0, -1]] = True  # keep the ends (refined like the rest)
-    refined = coarse + shift[:, None] * normals
-    refined = refined[ok]
+    refined, weight = refined[ok], weight[ok]
 
     # Pass 2: the smoothing spline at uniform arc length, then radius at every point.
-    points = _smooth_spline(refined, _FINE_SIGMA_PX, spacing_px)
+    points = _smooth_spline(refined, _FINE_SIGMA_PX, spacing_px, weight)
     normals = _unit_normals(points)
     r_guess = np.interp(
         np.linspace(0, 1, len(points)), np.linspace(0, 1, int(ok.sum())), radius1[ok]
