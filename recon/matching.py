@@ -23,6 +23,11 @@ Dynamic programming (eqs. 9-10, fig. 5), as implemented by :func:`dp_match`:
   open interval (0, CBOCD_i); taken literally (m in {1}) it would force the
   diagonal on an N x N matrix, so we follow eq. (10)'s inclusive range. With
   the fixed step 2 (match2) the local slope is 0, 1 or 2.
+* units: both traces have N points, so a step m is a local slope, the ratio
+  of the two views' local stretch of the vessel (after normalising both to
+  the same length), and needs no conversion to pixels. Fixed step 2 follows
+  ratios within [1/2, 2]; CBOCD raises the bound to 3..5 on OPE points of the
+  standard image (forward steps) and of the constructed image (repeats).
 * exceptional case: m = 0 repeats column j; once j has been repeated
   CBOCD_j - 1 times (i.e. matched to CBOCD_j consecutive standard points,
   CBOCD_j of the constructed image) m = 0 is no longer allowed. The paper's
@@ -41,12 +46,13 @@ curve without changing which branch of the vessel was chosen.
 from __future__ import annotations
 
 import time
-from typing import NamedTuple
+from collections.abc import Mapping
+from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from recon.cbocd import cbocd_descriptor
+from recon.cbocd import BETA_PX, GAMMA_PX, cbocd_descriptor
 from recon.geometry import ViewGeometry, epipolar_lines, point_line_distance_px
 from recon.types import Centerline2D, Matching
 
@@ -300,8 +306,9 @@ def match_centerlines(
     method: str = "match3",
     threshold_px: float = 2.0,
     alpha: int = 8,
-    beta: int = 5,
-    gamma: int = 2,
+    beta_px: float = BETA_PX,
+    gamma_px: float = GAMMA_PX,
+    cbocd_options: Mapping[str, Any] | None = None,
     subpixel: bool = True,
     max_points: int = MAX_POINTS,
 ) -> Matching:
@@ -313,7 +320,11 @@ def match_centerlines(
     view_a, view_b : the views (view B calibrated).
     method : one of :data:`MATCHERS`.
     threshold_px : STD of sec. 3.4.2 for the deviation pairs.
-    alpha, beta, gamma : CBOCD curvature parameters (match3).
+    alpha, beta_px, gamma_px : CBOCD curvature parameters (match3): sectors,
+        support half-width and noise tolerance in px of arc length
+        (:func:`recon.cbocd.cbocd_parts`).
+    cbocd_options : further keyword parameters of :func:`recon.cbocd.cbocd_parts`
+        (e.g. ``margin_sigma``, ``min_run_px``).
     subpixel : move matched points to the exact epipolar crossing (match2-4).
     max_points : cap on N (both traces are resampled to N points).
 
@@ -344,7 +355,7 @@ def match_centerlines(
             steps_s = np.full(n, FIXED_STEP)
             steps_c = np.full(n, FIXED_STEP)
         else:
-            kw = dict(alpha=alpha, beta=beta, gamma=gamma)
+            kw = dict(cbocd_options or {}, alpha=alpha, beta_px=beta_px, gamma_px=gamma_px)
             steps_s = cbocd_descriptor(std.points_px, std.brightness, **kw)
             steps_c = cbocd_descriptor(con.points_px, con.brightness, **kw)
         j = dp_match(cost, steps_s, steps_c)

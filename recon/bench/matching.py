@@ -18,6 +18,18 @@ If a case cannot be traced (``TraceError``), that case falls back to the
 true projected centerlines plus 0.3 px noise and is labelled
 ``"source": "truth-projection"`` in its record.
 
+Hard cases. The cycle above rarely foreshortens a vessel much more in one
+view than in the other, so the DP's step limit is almost never tested there.
+``run(hard_cases=K)`` adds K cases picked by a deterministic screen of the
+phantom trees (no rendering, :func:`foreshortening_ratio`): for each
+preset, seeds ``seed .. seed + HARD_SCREEN_SEEDS - 1`` are ranked by the
+largest ratio between the two views' local 2D stretch (over 3 mm of vessel,
+both traces normalised to the same length) and the top ones with a ratio of
+at least ``HARD_MIN_RATIO`` are taken, round-robin over the presets. Their
+medians are reported separately (``methods_hard``); ``methods`` stays the
+regular cycle. Each case record also holds how many OPE points CBOCD found
+in each trace (``ope``) and the case's foreshortening ratio.
+
 ``dp_ms_1000`` is the time of one CBOCD dynamic programming on a 1000 x 1000
 cost matrix with random steps in {2..5}.
 """
@@ -29,6 +41,7 @@ import time
 import numpy as np
 
 from recon.calibration import calibrate
+from recon.cbocd import cbocd_parts
 from recon.centerline import TraceError, trace_segment
 from recon.geometry import ViewGeometry
 from recon.matching import MATCHERS, dp_match, match_centerlines
@@ -36,10 +49,78 @@ from recon.phantom import PhantomCase, make_phantom
 from recon.triangulation import build_centerline_3d, point_polyline_distance, table3_metrics
 from recon.types import Centerline2D
 
-__all__ = ["run", "format_table", "time_dp_1000"]
+__all__ = ["run", "format_table", "time_dp_1000", "foreshortening_ratio", "hard_case_keys"]
 
 PRESET_CYCLE = ("data1", "data2", "data3", "static")
 FALLBACK_NOISE_PX = 0.3
+HARD_SCREEN_SEEDS = 40  # seeds screened per preset for the hard cases
+HARD_MIN_RATIO = 6.0  # a stretch 6x shorter in one view than in the other
+HARD_WINDOW_MM = 3.0
+
+
+def foreshortening_ratio(case: PhantomCase, window_mm: float = HARD_WINDOW_MM) -> float:
+    """Largest relative local 2D stretch between the two (true) views of the segment.
+
+    Both projected traces are normalised to unit length; over every window of
+    ``window_mm`` of 3D arc length the ratio of their normalised 2D lengths
+    (or its inverse, whichever is larger) is taken. 1 = the two views shrink
+    the vessel uniformly; 2 is the largest local slope the fixed-step DP
+    (match2) can follow.
+    """
+    X = case.truth.segment_X_world  # (M, 3), uniform 3D steps
+    s3 = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(X, axis=0), axis=1))])
+    k = max(1, int(np.searchsorted(s3, window_mm)))
+    s2 = []
+    for view in (case.view_a, case.view_b_true):
+        p = view.project(X)
+        s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(p, axis=0), axis=1))])
+        s2.append(s / s[-1])
+    if len(X) <= k:
+        return 1.0
+    da = s2[0][k:] - s2[0][:-k]
+    db = s2[1][k:] - s2[1][:-k]
+    r = np.maximum(db, 1e-12) / np.maximum(da, 1e-12)
+    return float(np.max(np.maximum(r, 1.0 / r)))
+
+
+def hard_case_keys(count: int, seed: int = 0, exclude: set | None = None) -> list[tuple]:
+    """(preset, seed, ratio) of ``count`` strongly foreshortened cases, see the module doc."""
+    exclude = exclude or set()
+    ranked = {}
+    for preset in PRESET_CYCLE:
+        found = []
+        for s in range(seed, seed + HARD_SCREEN_SEEDS):
+            if (preset, s) in exclude:
+                continue
+            ratio = foreshortening_ratio(make_phantom(preset, s, render=False))
+            if ratio >= HARD_MIN_RATIO:
+                found.append((ratio, s))
+        ranked[preset] = [(preset, s, r) for r, s in sorted(found, reverse=True)]
+    keys = []
+    for rank in range(HARD_SCREEN_SEEDS):
+        for preset in PRESET_CYCLE:
+            if len(keys) < count and rank < len(ranked[preset]):
+                keys.append(ranked[preset][rank])
+    return keys
+
+
+def _ope_counts(m) -> dict:
+    """OPE points CBOCD finds in the two resampled traces of a Matching (standard first)."""
+    out = {}
+    std, con = (
+        (m.centerline_a, m.centerline_b)
+        if m.standard_view == "a"
+        else (m.centerline_b, m.centerline_a)
+    )
+    for name, cl in (("standard", std), ("constructed", con)):
+        parts = cbocd_parts(cl.points_px, cl.brightness)
+        out[name] = {
+            "points": int(len(parts.value)),
+            "brightness": int(parts.brightness.sum()),
+            "curvature": int(parts.curvature.sum()),
+            "any": int((parts.value > 2).sum()),
+        }
+    return out
 
 
 def time_dp_1000(seed: int = 0, repeats: int = 3) -> float:
@@ -94,7 +175,7 @@ def _evaluate(cl_a, cl_b, view_a, view_b, method, truth_X) -> tuple[dict, object
     return record, m
 
 
-def evaluate_case(case: PhantomCase) -> dict:
+def evaluate_case(case: PhantomCase, hard: bool = False) -> dict:
     """All four matchers on one case; see the module docstring."""
     seg = case.seeds.segments[0]
     truth_X = case.truth.segment_X_world
@@ -116,6 +197,8 @@ def evaluate_case(case: PhantomCase) -> dict:
         "length_a_px": cl_a.length_px,
         "length_b_px": cl_b.length_px,
         "calibration_error_after_px": float(cal.error_after_px),
+        "hard": bool(hard),
+        "foreshortening_ratio": foreshortening_ratio(case),
         "methods": {},
     }
     for method in MATCHERS:
@@ -131,90 +214,142 @@ def evaluate_case(case: PhantomCase) -> dict:
             )
             rec, m = _evaluate(cl_a, cl_b, case.view_a, cal2.view_b, method, truth_X)
             rec["recalibrated"] = True
-        true_rec, _ = _evaluate(cl_a, cl_b, case.view_a, case.view_b_true, method, truth_X)
+        true_rec, true_m = _evaluate(cl_a, cl_b, case.view_a, case.view_b_true, method, truth_X)
+        if method == "match3":
+            out["ope"] = _ope_counts(true_m)
         rec["centerline_3d_rms_true_geometry_mm"] = true_rec["centerline_3d_rms_mm"]
         rec["backprojection_rms_true_geometry_mm"] = true_rec["backprojection_rms_mm"]
         out["methods"][method] = rec
     return out
 
 
-def run(cases: int = 10, seed: int = 0) -> dict:
-    """Run the benchmark on ``cases`` phantom cases; JSON-ready dict.
+KEYS = (
+    "backprojection_rms_mm",
+    "backprojection_mean_mm",
+    "backprojection_max_mm",
+    "ray_distance_mean_mm",
+    "centerline_3d_rms_mm",
+    "centerline_3d_rms_true_geometry_mm",
+    "backprojection_rms_true_geometry_mm",
+    "match_ms",
+)
+
+
+def _best_count(records: list[dict], name: str, key: str) -> int:
+    """Cases where ``name`` has the lowest ``key`` (ties within 1 um count for all)."""
+    return int(
+        sum(
+            r["methods"][name][key] <= min(r["methods"][m][key] for m in MATCHERS) + 1e-3
+            for r in records
+        )
+    )
+
+
+def _summary(records: list[dict]) -> dict:
+    """Medians over ``records`` per matcher, and how often each was best."""
+    if not records:
+        return {}
+    methods = {
+        name: {key: float(np.median([r["methods"][name][key] for r in records])) for key in KEYS}
+        for name in MATCHERS
+    }
+    for name in MATCHERS:  # ties (e.g. match3 == match2 when CBOCD is all 2) count for both
+        methods[name]["best_3d_cases"] = _best_count(records, name, "centerline_3d_rms_mm")
+        methods[name]["best_3d_true_geometry_cases"] = _best_count(
+            records, name, "centerline_3d_rms_true_geometry_mm"
+        )
+        methods[name]["best_backprojection_cases"] = _best_count(
+            records, name, "backprojection_rms_mm"
+        )
+    return methods
+
+
+def run(cases: int = 10, seed: int = 0, hard_cases: int = 8) -> dict:
+    """Run the benchmark on ``cases`` phantom cases plus ``hard_cases``; JSON-ready dict.
 
     Returns
     -------
     {"methods": {"match1": {backprojection_rms_mm, backprojection_mean_mm,
-    centerline_3d_rms_mm, centerline_3d_rms_true_geometry_mm, ...}, ...}
-    (medians over the cases), "dp_ms_1000": float, "cases": [per-case records],
-    "n_cases": int, "n_fallback": int}
+    centerline_3d_rms_mm, centerline_3d_rms_true_geometry_mm, best_*_cases, ...}, ...}
+    (medians over the regular cases), "methods_hard": the same over the hard
+    cases, "methods_all": over both, "dp_ms_1000": float, "cases": [per-case
+    records], "n_cases": int, "n_hard": int, "n_fallback": int}
     """
     if cases < 1:
         raise ValueError(f"cases must be at least 1, got {cases}")
+    if hard_cases < 0:
+        raise ValueError(f"hard_cases must be at least 0, got {hard_cases}")
     records = []
+    regular = set()
     for k in range(cases):
         preset = PRESET_CYCLE[k % len(PRESET_CYCLE)]
+        regular.add((preset, seed + k // len(PRESET_CYCLE)))
         case = make_phantom(preset, seed + k // len(PRESET_CYCLE))
         records.append(evaluate_case(case))
-    keys = [
-        "backprojection_rms_mm",
-        "backprojection_mean_mm",
-        "backprojection_max_mm",
-        "ray_distance_mean_mm",
-        "centerline_3d_rms_mm",
-        "centerline_3d_rms_true_geometry_mm",
-        "backprojection_rms_true_geometry_mm",
-        "match_ms",
-    ]
-    methods = {
-        name: {key: float(np.median([r["methods"][name][key] for r in records])) for key in keys}
-        for name in MATCHERS
-    }
-    for name in MATCHERS:  # ties (e.g. match3 == match2 when CBOCD is all 2) count for both
-        methods[name]["best_3d_cases"] = int(
-            sum(
-                r["methods"][name]["centerline_3d_rms_mm"]
-                <= min(r["methods"][m]["centerline_3d_rms_mm"] for m in MATCHERS) + 1e-3
-                for r in records
-            )
-        )
-        methods[name]["best_3d_true_geometry_cases"] = int(
-            sum(
-                r["methods"][name]["centerline_3d_rms_true_geometry_mm"]
-                <= min(r["methods"][m]["centerline_3d_rms_true_geometry_mm"] for m in MATCHERS)
-                + 1e-3
-                for r in records
-            )
-        )
+    hard_records = []
+    for preset, s, _ in hard_case_keys(hard_cases, seed, exclude=regular):
+        hard_records.append(evaluate_case(make_phantom(preset, s), hard=True))
     return {
-        "methods": methods,
+        "methods": _summary(records),
+        "methods_hard": _summary(hard_records),
+        "methods_all": _summary(records + hard_records),
         "dp_ms_1000": time_dp_1000(seed),
         "n_cases": len(records),
-        "n_fallback": int(sum(r["source"] != "traced" for r in records)),
-        "cases": records,
+        "n_hard": len(hard_records),
+        "n_fallback": int(sum(r["source"] != "traced" for r in records + hard_records)),
+        "cases": records + hard_records,
     }
+
+
+def _table_rows(methods: dict) -> list[str]:
+    rows = []
+    for name, m in methods.items():
+        rows.append(
+            f"{name:<8} {m['backprojection_max_mm']:8.4f} {m['backprojection_mean_mm']:8.4f} "
+            f"{m['backprojection_rms_mm']:8.4f} {m['ray_distance_mean_mm']:8.4f} "
+            f"{m['centerline_3d_rms_mm']:8.4f} {m['centerline_3d_rms_true_geometry_mm']:8.4f} "
+            f"{m['backprojection_rms_true_geometry_mm']:8.4f} "
+            f"{m['best_3d_cases']:5d} {m['best_3d_true_geometry_cases']:5d} "
+            f"{m['best_backprojection_cases']:5d} {m['match_ms']:6.1f}"
+        )
+    return rows
 
 
 def format_table(result: dict) -> str:
     """Table-3-style text table of :func:`run`'s result (medians over the cases)."""
-    lines = [
-        f"Matching benchmark, {result['n_cases']} phantom cases "
-        f"({result['n_fallback']} from true projections), medians",
+    header = (
         f"{'method':<8} {'BP max':>8} {'BP mean':>8} {'BP RMS':>8} {'rays':>8} "
-        f"{'3D RMS':>8} {'3D RMS*':>8} {'best':>5} {'best*':>5} {'ms':>6}",
+        f"{'3D RMS':>8} {'3D RMS*':>8} {'BP RMS*':>8} {'best':>5} {'best*':>5} {'bestBP':>5} "
+        f"{'ms':>6}"
+    )
+    lines = [
+        f"Matching benchmark, {result['n_cases']} phantom cases + {result['n_hard']} hard "
+        f"({result['n_fallback']} from true projections), medians",
+        f"regular cases ({result['n_cases']})",
+        header,
+        *_table_rows(result["methods"]),
     ]
-    for name, m in result["methods"].items():
-        lines.append(
-            f"{name:<8} {m['backprojection_max_mm']:8.4f} {m['backprojection_mean_mm']:8.4f} "
-            f"{m['backprojection_rms_mm']:8.4f} {m['ray_distance_mean_mm']:8.4f} "
-            f"{m['centerline_3d_rms_mm']:8.4f} {m['centerline_3d_rms_true_geometry_mm']:8.4f} "
-            f"{m['best_3d_cases']:5d} {m['best_3d_true_geometry_cases']:5d} {m['match_ms']:6.1f}"
-        )
+    if result.get("methods_hard"):
+        lines += [f"hard cases ({result['n_hard']})", header, *_table_rows(result["methods_hard"])]
     lines.append(
         "BP = back-projection distance traced 2D -> projected 3D centerline (mm at the "
         "detector, both views); rays = 3D inter-ray distance of the pairs; 3D RMS = distance "
-        "to the true centerline (mm) with calibrated B; 3D RMS* = with B's true geometry; "
-        "best = cases where the method had the lowest 3D RMS (within 1 um; * with B's true "
-        "geometry)"
+        "to the true centerline (mm) with calibrated B; * = with B's true geometry; "
+        "best = cases where the method had the lowest 3D RMS (within 1 um), bestBP the "
+        "lowest back-projection RMS"
     )
+    lines.append(
+        "per case: preset seed ratio | OPE points standard/constructed | 3D RMS* match2 match3"
+    )
+    for r in result["cases"]:
+        ope = r.get("ope", {})
+        s, c = ope.get("standard", {}), ope.get("constructed", {})
+        lines.append(
+            f"  {r['preset']:<7}{r['seed']:3d}{' hard' if r['hard'] else '     '} "
+            f"{r['foreshortening_ratio']:5.1f} | {s.get('any', 0):4d}/{s.get('points', 0):<4d} "
+            f"{c.get('any', 0):4d}/{c.get('points', 0):<4d} | "
+            f"{r['methods']['match2']['centerline_3d_rms_true_geometry_mm']:7.3f} "
+            f"{r['methods']['match3']['centerline_3d_rms_true_geometry_mm']:7.3f}"
+        )
     lines.append(f"CBOCD DP on a 1000 x 1000 COST: {result['dp_ms_1000']:.1f} ms")
     return "\n".join(lines)

@@ -2,10 +2,14 @@ import numpy as np
 import pytest
 
 from recon.cbocd import (
+    BETA_PX,
     brightness_ope,
     cbocd_descriptor,
+    cbocd_parts,
     curvature_ope,
     postprocess_ope,
+    px_to_points,
+    trace_spacing_px,
 )
 
 
@@ -114,3 +118,53 @@ def test_postprocess_keeps_ends_open():
     m[3:8] = True
     out = postprocess_ope(m, join_short_gap=5, min_run=2, join_long_gap=50)
     assert np.array_equal(out, m)
+
+
+# ------------------------------------------------- lengths in px, robust trend
+def u_turn(spacing_px: float, radius_px: float = 6.0) -> tuple[np.ndarray, int, int]:
+    """Straight 40 px, a U-turn, straight back: (N, 2) and the index range of the arc."""
+    n_line = int(round(40 / spacing_px))
+    straight = line(n_line, angle_deg=0.0, spacing=spacing_px)
+    n_arc = int(round(np.pi * radius_px / spacing_px))
+    th = np.linspace(-np.pi / 2, np.pi / 2, n_arc + 2)[1:-1]
+    arc = straight[-1] + [0, radius_px] + radius_px * np.column_stack([np.cos(th), np.sin(th)])
+    back = straight[::-1] + [0, 2 * radius_px]
+    return np.vstack([straight, arc, back]), n_line, n_line + n_arc
+
+
+@pytest.mark.parametrize("spacing", [0.25, 0.5, 1.0])
+def test_curvature_ope_is_the_same_stretch_at_any_spacing(spacing):
+    pts, a0, a1 = u_turn(spacing)
+    parts = cbocd_parts(pts, np.full(len(pts), 80.0))
+    assert parts.spacing_px == pytest.approx(spacing, rel=0.02)
+    s = np.arange(len(pts)) * spacing  # arc length (px)
+    flagged = s[parts.curvature]
+    # the turn (arc length 40 .. 40 + pi * 6 px) is flagged, +- the support half-width
+    assert parts.curvature[a0:a1].all()
+    assert flagged.min() > 40 - BETA_PX - 1 and flagged.max() < s[a1] + BETA_PX + 1
+    assert not parts.brightness.any()
+
+
+def test_gentle_arc_is_not_curvature_ope_at_fine_spacing():
+    th = np.linspace(0, np.pi / 2, 630)  # radius 100 px at 0.25 px spacing
+    pts = 100 * np.column_stack([np.cos(th), np.sin(th)])
+    assert not cbocd_parts(pts, np.full(len(pts), 80.0)).curvature.any()
+
+
+def test_px_to_points_and_spacing():
+    assert trace_spacing_px(line(11, spacing=0.5)) == pytest.approx(0.5)
+    assert px_to_points(10.0, 0.5) == 20
+    assert px_to_points(0.1, 0.5, 1) == 1
+
+
+def test_dark_end_needs_the_robust_trend():
+    # a trace whose last 4 px run along the ray: very dark there (more iodine per pixel)
+    n = 400  # 0.5 px spacing
+    b = np.linspace(100.0, 110.0, n) + np.random.default_rng(3).normal(0, 0.5, n)
+    b[-8:] -= 40.0
+    paper = brightness_ope(b, trend="ends")
+    robust = brightness_ope(b)
+    assert not paper[-8:].any()  # InLast is dark: the paper's line hides the OPE
+    assert robust[-8:].all() and robust[:-10].mean() < 0.05
+    with pytest.raises(ValueError, match="trend"):
+        brightness_ope(b, trend="median")

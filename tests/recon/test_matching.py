@@ -272,3 +272,43 @@ def test_unknown_method():
     ca, cb = projected_centerline(X, va), projected_centerline(X, vb)
     with pytest.raises(ValueError, match="match9"):
         match_centerlines(ca, cb, va, vb, method="match9")
+
+
+# ------------------------------------------------ OPE: a distal end seen end-on
+def end_on_curve(view: ViewGeometry, tilt_rad: float = 0.2) -> np.ndarray:
+    """The gentle curve, then 12 mm turning towards ``view``'s source (tilted by tilt_rad).
+
+    In that view the last ~12 mm project onto a few pixels (and are dark): an
+    OPE that needs many standard points per constructed point.
+    """
+    X = coronary_curve("gentle", 2000)
+    to_src = view.source_world - X[-1]
+    to_src /= np.linalg.norm(to_src)
+    t = X[-1] - X[-2]
+    t /= np.linalg.norm(t)
+    perp = t - (t @ to_src) * to_src
+    perp /= np.linalg.norm(perp)
+    d = np.cos(tilt_rad) * to_src + np.sin(tilt_rad) * perp
+    s = np.linspace(0.0, 12.0, 400)[1:]
+    w = np.clip(s / 3.0, 0.0, 1.0)[:, None]  # turn over the first 3 mm
+    dirs = (1 - w) * t + w * d
+    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+    return np.vstack([X, X[-1] + np.cumsum(dirs * (s[1] - s[0]), axis=0)])
+
+
+@pytest.mark.parametrize("name", ["data1", "data3"])
+def test_match3_follows_an_end_on_ope_where_match2_gets_stuck(name):
+    va, vb = table1_views(name)
+    X = end_on_curve(vb)
+    ca = projected_centerline(X, va, spacing_px=0.5)
+    cb = projected_centerline(X, vb, spacing_px=0.5)
+    rms = {}
+    for method in ("match2", "match3"):
+        m = match_centerlines(ca, cb, va, vb, method=method)
+        err = point_polyline_distance(build_centerline_3d(m, va, vb).X_world, X)
+        rms[method] = float(np.sqrt(np.mean(err**2)))
+        if method == "match3":  # B (constructed) repeats its end points more than twice
+            runs = np.bincount(m.index_b)
+            assert m.standard_view == "a" and runs.max() > 2
+    assert rms["match3"] < 0.1
+    assert rms["match2"] > 3 * rms["match3"]
