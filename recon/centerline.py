@@ -670,11 +670,12 @@ def trace_segment(
         np.linspace(0, 1, len(points)), np.linspace(0, 1, int(ok.sum())), radius1[ok]
     )
     r_guess = np.nan_to_num(r_guess, nan=2.0)
-    _, radius, ok2, _ = _fit_along(
+    _, radius, ok2, rss2 = _fit_along(
         absorb, points - origin, normals, r_guess, np.array([0.0]), blur_px, 0.1
     )
     if not np.any(ok2):
         raise TraceError(f"view {view}: no vessel profile could be fitted along the trace")
+    reliability = _reliability(radius, rss2, ok2)
     idx = np.arange(len(points))
     radius = np.interp(idx, idx[ok2], radius[ok2])
     radius = _smooth_radius(radius, spacing_px)
@@ -685,5 +686,9 @@ def trace_segment(
     on_trace = points[np.argmin(d, axis=1)]
     on_trace[0], on_trace[-1] = points[0], points[-1]
     return Centerline2D(
-        points_px=points, radius_px=radius, brightness=brightness, clicks_px=on_trace
+        points_px=points,
+        radius_px=radius,
+        brightness=brightness,
+        clicks_px=on_trace,
+        reliability=reliability,
     )

@@ -114,6 +114,7 @@ class Reconstruction:
     def report(self) -> dict:
         """JSON-ready report: inputs, geometry, calibration, matching, measurements, timings."""
         cal = self.calibration
+        c3 = self.centerline_3d
         return {
             "software": {"name": "coronary3d", "version": __version__},
             "inputs": {
@@ -154,6 +155,10 @@ class Reconstruction:
                 "length_mm": self.centerline_3d.length_mm,
                 "traced_length_a_px": self.centerline_a.length_px,
                 "traced_length_b_px": self.centerline_b.length_px,
+                # 3D arc-length stretches [start, end] mm where that view's radius was
+                # not trusted (another vessel over it) and the other view's stood in
+                "overlap_a_mm": c3.overlap_stretches_mm("a"),
+                "overlap_b_mm": c3.overlap_stretches_mm("b"),
             },
             "mesh": {
                 "vertices": int(len(self.surface.mesh.vertices)),

@@ -4,13 +4,23 @@ Steps of :func:`build_centerline_3d`:
 
 1. triangulate the matched pixels (eqs. 2-3, ``recon.geometry.triangulate``);
 2. fit a 3D smoothing spline X(t) (``scipy.interpolate.make_smoothing_spline``,
-   smoothing chosen by generalised cross-validation) against the chord
+   a fixed bandwidth ``SMOOTHING_MM`` along the vessel) against the chord
    length t of the raw points, as the paper smooths its skeleton (fig. 10a);
 3. resample X at uniform arc length ``spacing_mm``; unit tangents from X'(t);
 4. radii: the 2D radius of each view at the matched point, scaled back to
    the vessel by eq. (11): r_mm = r_px * pixel_size * |X - S| / |D - S|,
    D the detector point of X's projection and S the source, which is the
-   paper's sqrt(x^2 + y^2 + z^2) / sqrt(u^2 + v^2 + SID^2).
+   paper's sqrt(x^2 + y^2 + z^2) / sqrt(u^2 + v^2 + SID^2);
+5. overlaps: where one view's profile fit is not trusted (its 2D reliability
+   is below ``OVERLAP_RELIABILITY``: another vessel overlaps or touches it
+   there, which widens the fitted lumen) and the other view's is, and the
+   untrusted radius is the larger, the trusted view's radius stands in for
+   both ellipse axes (a circular lumen is the best guess when one view
+   cannot see the width). The stretches are widened by ``OVERLAP_MARGIN_MM``
+   and returned as ``overlap_a``/``overlap_b``; the report lists them. On the
+   12 benchmark cases this changes the median MLD and %DS errors by less
+   than 0.01 mm and 0.1 points; single overlapped cases gain (data2/1: MLD
+   error 0.21 -> 0.17 mm).
 """
 
 from __future__ import annotations
@@ -18,6 +28,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.interpolate import make_smoothing_spline
+from scipy.ndimage import binary_dilation
 
 from recon.geometry import ViewGeometry, ray_distance_mm, triangulate
 from recon.types import Centerline3D, Matching
@@ -32,6 +43,11 @@ __all__ = [
 ]
 
 FloatArray = NDArray[np.float64]
+
+#: A 2D profile fit with a lower reliability is not trusted for the radius.
+OVERLAP_RELIABILITY = 0.5
+#: Each untrusted stretch is widened by this much on both sides (mm of 3D arc).
+OVERLAP_MARGIN_MM = 1.0
 
 
 class TriangulationError(ValueError):
@@ -113,6 +129,7 @@ def build_centerline_3d(
     smoothing_mm: float = SMOOTHING_MM,
     weighted: bool = True,
     min_weight: float = 0.02,
+    overlap_substitution: bool = True,
 ) -> Centerline3D:
     """Triangulate a matching into a smooth 3D centerline (world mm).
 
@@ -133,6 +150,8 @@ def build_centerline_3d(
         between the vessel and the epipolar plane (see :func:`epipolar_weights`);
         a trace error of d px moves the point by about d / sin(angle).
     min_weight : floor of those weights.
+    overlap_substitution : replace an untrusted view's radius by the other
+        view's (step 5 of the module docstring); False keeps both as traced.
 
     Returns
     -------
@@ -174,16 +193,50 @@ def build_centerline_3d(
     # 2D radii along the matched indices, as functions of the spline parameter
     rad_a_px = np.interp(t_out, t_k, matching.centerline_a.radius_px[matching.index_a][keep])
     rad_b_px = np.interp(t_out, t_k, matching.centerline_b.radius_px[matching.index_b][keep])
+    radius_a_mm = radius_mm_eq11(rad_a_px, X_out, view_a)
+    radius_b_mm = radius_mm_eq11(rad_b_px, X_out, view_b)
+    overlap_a = np.zeros(len(s_out), dtype=bool)
+    overlap_b = np.zeros(len(s_out), dtype=bool)
+    if overlap_substitution:
+        rel_a = np.interp(t_out, t_k, matching.centerline_a.reliability[matching.index_a][keep])
+        rel_b = np.interp(t_out, t_k, matching.centerline_b.reliability[matching.index_b][keep])
+        overlap_a, overlap_b = _overlap_stretches(rel_a, rel_b, spacing_mm)
+        # An overlap only widens the fitted lumen: replace where the untrusted view is wider.
+        overlap_a &= radius_a_mm > radius_b_mm
+        overlap_b &= radius_b_mm > radius_a_mm
+        radius_a_mm, radius_b_mm = (
+            np.where(overlap_a, radius_b_mm, radius_a_mm),
+            np.where(overlap_b, radius_a_mm, radius_b_mm),
+        )
     return Centerline3D(
         X_world=X_out,
         s_mm=s_out,
         tangents=tangents,
-        radius_a_mm=radius_mm_eq11(rad_a_px, X_out, view_a),
-        radius_b_mm=radius_mm_eq11(rad_b_px, X_out, view_b),
+        radius_a_mm=radius_a_mm,
+        radius_b_mm=radius_b_mm,
         X_raw_world=X_raw,
         points_a_px=pa,
         points_b_px=pb,
+        overlap_a=overlap_a,
+        overlap_b=overlap_b,
     )
+
+
+def _overlap_stretches(
+    reliability_a: FloatArray, reliability_b: FloatArray, spacing_mm: float
+) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
+    """Where each view's radius is replaced by the other's: (M,) bool masks for A and B.
+
+    A view is untrusted where its reliability (M,) is below
+    OVERLAP_RELIABILITY, widened by OVERLAP_MARGIN_MM along the uniform
+    3D arc (``spacing_mm`` per point); it is replaced only where the other
+    view is trusted.
+    """
+    half = int(np.ceil(OVERLAP_MARGIN_MM / spacing_mm))
+    structure = np.ones(2 * half + 1, dtype=bool)
+    low_a = binary_dilation(reliability_a < OVERLAP_RELIABILITY, structure)
+    low_b = binary_dilation(reliability_b < OVERLAP_RELIABILITY, structure)
+    return low_a & ~low_b, low_b & ~low_a
 
 
 def point_polyline_distance(

@@ -33,18 +33,24 @@ class Centerline2D:
     brightness : (N,) image value on the centerline (raw units; lower = more
         contrast for MONOCHROME2), used by CBOCD eq. (7).
     clicks_px : (K, 2) the snapped clicks the trace passes through.
+    reliability : (N,) confidence in (0, 1] of the profile fit behind each
+        point's centre and radius (1 = one clean tube; low where another
+        vessel overlaps or touches); all ones when not given.
     """
 
     points_px: FloatArray
     radius_px: FloatArray
     brightness: FloatArray
     clicks_px: FloatArray = field(default_factory=lambda: np.zeros((0, 2)))
+    reliability: FloatArray | None = None
 
     def __post_init__(self) -> None:
         n = len(self.points_px)
         if self.points_px.shape != (n, 2) or n < 2:
             raise ValueError(f"points_px must be (N>=2, 2), got {self.points_px.shape}")
-        for name in ("radius_px", "brightness"):
+        if self.reliability is None:
+            object.__setattr__(self, "reliability", np.ones(n))
+        for name in ("radius_px", "brightness", "reliability"):
             if getattr(self, name).shape != (n,):
                 raise ValueError(f"{name} must be ({n},), got {getattr(self, name).shape}")
 
@@ -84,6 +90,7 @@ class Centerline2D:
             radius_px=np.interp(s_new, s, self.radius_px[keep]),
             brightness=np.interp(s_new, s, self.brightness[keep]),
             clicks_px=self.clicks_px,
+            reliability=np.interp(s_new, s, np.asarray(self.reliability)[keep]),
         )
 
 
@@ -135,6 +142,10 @@ class Centerline3D:
         lengths of sec. 3.5).
     X_raw_world : (K, 3) the triangulated matched points before smoothing.
     points_a_px, points_b_px : (K, 2) the matched pixels behind X_raw_world.
+    overlap_a, overlap_b : (M,) bool, True where that view's radius could not
+        be trusted (another vessel overlapping) and the other view's radius
+        stands in for it (see :func:`recon.triangulation.build_centerline_3d`);
+        all False when not given.
     """
 
     X_world: FloatArray
@@ -145,10 +156,30 @@ class Centerline3D:
     X_raw_world: FloatArray
     points_a_px: FloatArray
     points_b_px: FloatArray
+    overlap_a: NDArray[np.bool_] | None = None
+    overlap_b: NDArray[np.bool_] | None = None
+
+    def __post_init__(self) -> None:
+        m = len(self.X_world)
+        for name in ("overlap_a", "overlap_b"):
+            if getattr(self, name) is None:
+                object.__setattr__(self, name, np.zeros(m, dtype=bool))
+            elif np.shape(getattr(self, name)) != (m,):
+                raise ValueError(f"{name} must be ({m},), got {np.shape(getattr(self, name))}")
 
     @property
     def length_mm(self) -> float:
         return float(self.s_mm[-1])
+
+    def overlap_stretches_mm(self, view: str) -> list[list[float]]:
+        """Stretches [start, end] (mm of arc) where view "a" or "b" had its radius replaced."""
+        mask = self.overlap_a if view == "a" else self.overlap_b
+        edges = np.diff(np.concatenate([[0], np.asarray(mask, dtype=np.int8), [0]]))
+        starts, stops = np.nonzero(edges == 1)[0], np.nonzero(edges == -1)[0] - 1
+        return [
+            [round(float(self.s_mm[i]), 2), round(float(self.s_mm[j]), 2)]
+            for i, j in zip(starts, stops, strict=True)
+        ]
 
     @property
     def radius_mm(self) -> FloatArray:

@@ -809,6 +809,12 @@ class ViewerApp:
         """3D measurements, the Table-3 metrics (per-view sub-tables side by side) and timings."""
         rows = ["| measurement | value |", "| --- | --- |"]
         rows += [f"| {k} | {_fmt(v)} |" for k, v in rec.measurements.to_dict().items()]
+        for view, other in (("a", "B"), ("b", "A")):
+            stretches = rec.centerline_3d.overlap_stretches_mm(view)
+            if stretches:
+                where = ", ".join(f"{a:.1f}-{b:.1f}" for a, b in stretches)
+                rows.append(f"| view {view.upper()} overlapped: radius from view {other} "
+                            f"| {where} mm |")
         metrics = dict(rec.metrics)
         per_view = {k: metrics.pop(k) for k in list(metrics) if isinstance(metrics[k], dict)}
         if per_view:

@@ -1,5 +1,6 @@
 """The whole pipeline: on phantoms against ground truth, and on the real static phantom pair."""
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -126,6 +127,10 @@ def test_real_static_phantom_pair(tmp_path):
     paths = write_outputs(rec, tmp_path, formats=("stl", "ply"))
     assert sorted(p.name for p in paths) == ["centerline.csv", "mesh.ply", "mesh.stl",
                                              "report.json"]
+    report = json.loads((tmp_path / "report.json").read_text())
+    for key in ("overlap_a_mm", "overlap_b_mm"):  # stretches where one view's radius stood in
+        for start, end in report["centerline"][key]:
+            assert 0.0 <= start <= end <= rec.centerline_3d.length_mm + 1e-6
     loaded = trimesh.load(tmp_path / "mesh.ply")
     assert loaded.is_watertight
     assert np.isclose(loaded.volume, mesh.volume, rtol=1e-3)

@@ -141,3 +141,50 @@ def test_too_few_pairs():
     va, vb = table1_views("data1")
     with pytest.raises(TriangulationError):
         build_centerline_3d(m, va, vb)
+
+
+def _with_overlap(
+    cl: Centerline2D, X: np.ndarray, view, start: float, stop: float, factor: float
+) -> Centerline2D:
+    """The trace with its radius widened by ``factor`` and its reliability 0.1 where it
+    shows the stretch [start, stop] (fractions of 3D arc length) of the curve X (another
+    vessel lying over it there)."""
+    s3 = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(X, axis=0), axis=1))])
+    p = view.project(X)
+    nearest = np.argmin(np.linalg.norm(cl.points_px[:, None] - p[None], axis=2), axis=1)
+    frac = s3[nearest] / s3[-1]
+    sel = (frac >= start) & (frac <= stop)
+    radius, reliability = cl.radius_px.copy(), np.ones(len(frac))
+    radius[sel] *= factor
+    reliability[sel] = 0.1
+    return Centerline2D(cl.points_px, radius, cl.brightness, reliability=reliability)
+
+
+def test_overlap_in_one_view_takes_the_other_views_radius():
+    X = coronary_curve("gentle")
+    va, vb = table1_views("data1")
+    ca = _with_overlap(projected_centerline(X, va), X, va, 0.4, 0.6, 1.8)
+    cb = projected_centerline(X, vb)
+    m = match_centerlines(ca, cb, va, vb, method="match3")
+    fixed = build_centerline_3d(m, va, vb)
+    raw = build_centerline_3d(m, va, vb, overlap_substitution=False)
+    assert not np.any(fixed.overlap_b) and not np.any(raw.overlap_a)
+    mid = fixed.s_mm / fixed.length_mm
+    inside = (mid > 0.45) & (mid < 0.55)
+    outside = (mid < 0.3) | (mid > 0.7)
+    assert np.all(fixed.overlap_a[inside]) and not np.any(fixed.overlap_a[outside])
+    # As traced, A's radius is 1.8x B's on the overlap; substituted, they agree.
+    assert np.median(raw.radius_a_mm[inside] / raw.radius_b_mm[inside]) > 1.6
+    assert np.allclose(fixed.radius_a_mm[inside], fixed.radius_b_mm[inside])
+    assert np.allclose(fixed.radius_a_mm[outside], raw.radius_a_mm[outside])
+
+
+def test_overlap_in_both_views_keeps_both_radii():
+    X = coronary_curve("gentle")
+    va, vb = table1_views("data1")
+    ca = _with_overlap(projected_centerline(X, va), X, va, 0.4, 0.6, 1.5)
+    cb = _with_overlap(projected_centerline(X, vb), X, vb, 0.4, 0.6, 1.5)
+    c3 = build_centerline_3d(match_centerlines(ca, cb, va, vb, method="match3"), va, vb)
+    mid = c3.s_mm / c3.length_mm
+    inside = (mid > 0.45) & (mid < 0.55)
+    assert not np.any(c3.overlap_a[inside]) and not np.any(c3.overlap_b[inside])
