@@ -43,6 +43,10 @@ FloatArray = NDArray[np.float64]
 BLUR_SIGMA_PX = 0.7
 #: Response (after normalisation to [0, 1]) above which a pixel counts as vessel.
 _RIDGE_THRESHOLD = 0.15
+#: Around a click a vessel only half as strong as the strongest ridge within reach
+#: still counts (vesselness is normalised per image, so a faint distal vessel can
+#: stay below _RIDGE_THRESHOLD); never below this floor (image noise is < 0.02).
+_RIDGE_FLOOR = 0.05
 _FRANGI_BETA = 0.5
 _PROFILE_STEP_PX = 0.5
 _COARSE_SIGMA_PX = 0.4
@@ -232,7 +236,8 @@ def snap_click(
     resp = vmap.response[r0:r1, c0:c1]
     rr, cc = np.mgrid[r0:r1, c0:c1]
     dist = np.hypot(cc - col, rr - row)
-    strong = resp >= _RIDGE_THRESHOLD
+    reach_peak = float(resp[dist <= max_distance_px].max(initial=0.0))
+    strong = resp >= float(np.clip(0.5 * reach_peak, _RIDGE_FLOOR, _RIDGE_THRESHOLD))
     if not np.any(strong):
         raise TraceError(f"{where} is more than {search:.0f} px from any vessel")
     d_near = float(dist[strong].min())

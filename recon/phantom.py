@@ -105,6 +105,7 @@ HEADER_SHIFT_MM = (2.0, 5.0)  # |isocenter / table shift| range, random directio
 
 CLICK_NOISE_PX = 0.7  # sd of the clinician's click error per coordinate
 CLICK_ROUND_PX = 0.1  # clicks are stored rounded to this
+WAYPOINT_MIN_GAP_PX = 5.0  # no waypoint this close to a neighbouring click
 
 # Tree.
 MAIN_LENGTH_MM = (80.0, 140.0)
@@ -558,7 +559,13 @@ def _make_seeds(
         n_way = int(rng.integers(1, 3))
         way = np.sort(rng.uniform(0.25, 0.75, n_way))
         idx = np.concatenate([[0], np.round(way * (n - 1)).astype(int), [n - 1]])
-        clicks[key] = tuple(_click(rng, view.project(seg_X[idx])))
+        pts = _click(rng, view.project(seg_X[idx]))
+        # A clinician puts no waypoint where the vessel is foreshortened onto another
+        # click (running along the ray): drop waypoints within WAYPOINT_MIN_GAP_PX.
+        gaps = np.linalg.norm(np.subtract(pts[1:], pts[:-1]), axis=1)
+        crowded = np.zeros(len(pts), dtype=bool)
+        crowded[1:-1] = (gaps[:-1] < WAYPOINT_MIN_GAP_PX) | (gaps[1:] < WAYPOINT_MIN_GAP_PX)
+        clicks[key] = tuple(p for p, c in zip(pts, crowded, strict=True) if not c)
     segment = Segment(name="main", a_px=clicks["a"], b_px=clicks["b"])
     features = []
     if len(branch_X):

@@ -88,6 +88,20 @@ def test_vesselness_does_not_modify_input() -> None:
 
 
 # ----------------------------------------------------------------- snapping
+def test_snap_finds_a_faint_vessel_beside_a_strong_one() -> None:
+    """Vesselness is normalised per image, so a thin distal vessel may stay below the
+    global ridge threshold; a click on it must still snap onto it."""
+    strong, faint = segment((10, 30), (150, 30)), segment((10, 90), (150, 90))
+    img = render((120, 160), [(strong, np.full(len(strong), 5.0)),
+                              (faint, np.full(len(faint), 1.2))], noise=2.0)
+    vmap = compute_vesselness(img)
+    assert vmap.response[86:95, 40:120].max() < 0.15  # below the global threshold
+    snapped, dist = snap_click(vmap, (80.0, 92.5))
+    assert abs(snapped[1] - 90.0) <= 1.0 and dist < 3.5
+    with pytest.raises(TraceError, match="from any vessel"):
+        snap_click(vmap, (80.0, 60.0))  # empty background between them
+
+
 def test_snap_click_moves_across_not_along() -> None:
     line = segment((10, 40), (110, 40))
     img = render((80, 120), [(line, np.full(len(line), 3.0))], noise=5.0)

@@ -334,3 +334,12 @@ def test_load_truth_names_the_bad_file(tmp_path):
     bad.write_text("{}")
     with pytest.raises(ph.PhantomError, match="truth.json"):
         ph.load_truth(bad)
+
+
+def test_no_waypoint_crowds_another_click() -> None:
+    """data1/128 foreshortens the distal quarter in view B onto its end: no waypoint there."""
+    for preset, seed in (("data1", 128), ("static", 7), ("data3", 110)):
+        seg = ph.make_phantom(preset, seed, render=False).seeds.segments[0]
+        for clicks in (seg.a, seg.b):
+            gaps = np.linalg.norm(np.diff(np.asarray(clicks), axis=0), axis=1)
+            assert len(clicks) >= 2 and gaps.min() >= ph.WAYPOINT_MIN_GAP_PX, (preset, seed)
