@@ -133,10 +133,16 @@ def run(cases: int = 8, seed: int = 0, stenosis_pct: float = 50.0,
     """Run the end-to-end benchmark on ``cases`` phantom cases; medians and rows."""
     options = ReconstructionOptions(self_calibration=self_calibration)
     rows = []
+    failures = []
     for k in range(cases):
         preset = PRESET_CYCLE[k % len(PRESET_CYCLE)]
         case = make_phantom(preset, seed + k, stenosis_pct=stenosis_pct)
-        rows.append(evaluate_case(case, options))
+        try:
+            rows.append(evaluate_case(case, options))
+        except ValueError as err:  # a failed case is a result, not a crash of the bench
+            failures.append({"preset": preset, "seed": seed + k, "error": str(err)})
+    if not rows:
+        raise ValueError(f"bench reconstruct: all {cases} cases failed, first: {failures[0]}")
 
     def med(key: str, absolute: bool = False) -> float:
         values = np.array([r[key] for r in rows], dtype=float)
@@ -145,6 +151,7 @@ def run(cases: int = 8, seed: int = 0, stenosis_pct: float = 50.0,
     stages = sorted({s for r in rows for s in r["timings_ms"]})
     return {
         "cases": len(rows),
+        "failures": failures,
         "self_calibration": self_calibration,
         "centerline_3d_rms_mm": med("centerline_3d_rms_mm"),
         "centerline_3d_rms_scale_free_mm": med("centerline_3d_rms_scale_free_mm"),
@@ -187,6 +194,8 @@ def format_table(result: dict) -> str:
             f"{r['pose_displacement_mm_before']:10.2f} -> {r['pose_displacement_mm_after']:<8.2f}"
             f" {r['wall_ms']:7.0f}"
         )
+    for f in result.get("failures", []):
+        lines.append(f"{f['preset'] + '/' + str(f['seed']):<10} FAILED: {f['error']}")
     lines += [
         "",
         f"median 3D centerline RMS error  {result['centerline_3d_rms_mm']:.3f} mm "
@@ -202,5 +211,6 @@ def format_table(result: dict) -> str:
         f"pose better than header         {result['pose_improved_rate'] * 100:.0f} %",
         f"median pipeline time            {result['median_pipeline_ms']:.0f} ms "
         + ", ".join(f"{k} {v:.0f}" for k, v in result["median_stage_ms"].items()),
+        f"failed cases                    {len(result.get('failures', []))}",
     ]
     return "\n".join(lines)
