@@ -26,7 +26,7 @@ from scipy import ndimage as ndi
 from scipy.interpolate import splev, splprep
 from skimage.graph import route_through_array
 
-from recon.types import Centerline2D
+from recon.types import Centerline2D, arclength
 
 __all__ = [
     "TraceError",
@@ -430,7 +430,7 @@ def _unit_normals(points_px: FloatArray) -> FloatArray:
 
 def _resample_uniform(points_px: FloatArray, spacing_px: float) -> FloatArray:
     """Polyline (N, 2) resampled at uniform arc length (linear), ends kept."""
-    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points_px, axis=0), axis=1))])
+    s = arclength(points_px)
     n = max(int(np.ceil(s[-1] / spacing_px)) + 1, 2)
     s_new = np.linspace(0.0, s[-1], n)
     return np.column_stack([np.interp(s_new, s, points_px[:, 0]),
@@ -456,7 +456,7 @@ def _smooth_spline(
     tck, _ = splprep([pts[:, 0], pts[:, 1]], w=weights, s=s_total, k=3)
     u_dense = np.linspace(0.0, 1.0, max(8 * len(pts), 64))
     dense = np.column_stack(splev(u_dense, tck))
-    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(dense, axis=0), axis=1))])
+    s = arclength(dense)
     n = max(int(round(s[-1] / spacing_px)) + 1, 2)
     u_new = np.interp(np.linspace(0.0, s[-1], n), s, u_dense)
     return np.column_stack(splev(u_new, tck))

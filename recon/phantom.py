@@ -73,6 +73,7 @@ from scipy import ndimage
 from recon.fileio import atomic_write_bytes
 from recon.geometry import ViewGeometry, rotation_from_rotvec, rotvec_from_rotation
 from recon.seeds import Feature, Seeds, Segment, save_seeds
+from recon.types import arclength
 
 __all__ = [
     "PhantomPreset",
@@ -382,7 +383,7 @@ class _Heart:
 
 def _resample_uniform(X: FloatArray, step: float, length: float | None = None) -> FloatArray:
     """Resample a dense polyline (N, 3) at uniform arc length ``step`` up to ``length``."""
-    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(X, axis=0), axis=1))])
+    s = arclength(X)
     total = s[-1] if length is None else min(length, s[-1])
     s_new = np.arange(0.0, total + 1e-9, step)
     return np.column_stack([np.interp(s_new, s, X[:, k]) for k in range(3)])
@@ -426,10 +427,6 @@ def _random_tangent(rng: np.random.Generator, y0: FloatArray) -> FloatArray:
     return w / np.linalg.norm(w)
 
 
-def _arclength(X: FloatArray) -> FloatArray:
-    return np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(X, axis=0), axis=1))])
-
-
 @dataclass(frozen=True)
 class _TreeDraw:
     heart: _Heart
@@ -456,7 +453,7 @@ def _draw_tree(rng: np.random.Generator) -> _TreeDraw | None:
     y0 = rng.normal(size=3)
     y0 /= np.linalg.norm(y0)
     main_X = _surface_curve(rng, heart, y0, _random_tangent(rng, y0), length)
-    if _arclength(main_X)[-1] < 0.98 * length:
+    if arclength(main_X)[-1] < 0.98 * length:
         return None
     n = len(main_X)
     seg_start = int(rng.uniform(0.08, 0.15) * (n - 1))

@@ -28,7 +28,7 @@ from scipy.spatial import cKDTree
 from skimage.measure import marching_cubes
 
 from recon.geometry import ViewGeometry
-from recon.types import Centerline3D
+from recon.types import Centerline3D, arclength
 
 FloatArray = NDArray[np.float64]
 
@@ -397,7 +397,7 @@ def _shell_voxels(
     (shell = outer minus inner, inner).
     """
     X = sections.centers
-    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(X, axis=0), axis=1))])
+    s = arclength(X)
     step = 0.5  # mm between samples
     n = max(2, int(np.ceil(s[-1] / step)) + 1)
     s_k = np.linspace(0.0, s[-1], n)

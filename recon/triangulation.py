@@ -31,7 +31,7 @@ from scipy.interpolate import make_smoothing_spline
 from scipy.ndimage import binary_dilation
 
 from recon.geometry import ViewGeometry, ray_distance_mm, triangulate
-from recon.types import Centerline3D, Matching
+from recon.types import Centerline3D, Matching, arclength
 
 __all__ = [
     "TriangulationError",
@@ -90,7 +90,7 @@ def _presmoothed(X: FloatArray, width: int = 5) -> FloatArray:
 def _chord_parameter(X: FloatArray) -> FloatArray:
     """Cumulative chord length (N,) of lightly pre-smoothed points (N, 3)."""
     Xs = _presmoothed(X)
-    return np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(Xs, axis=0), axis=1))])
+    return arclength(Xs)
 
 
 def epipolar_weights(
@@ -180,9 +180,7 @@ def build_centerline_3d(
     # uniform arc length of the smoothed curve, from a dense sampling
     t_dense = np.linspace(t_k[0], t_k[-1], max(20 * len(t_k), 2000))
     X_dense = spline(t_dense)
-    s_dense = np.concatenate(
-        [[0.0], np.cumsum(np.linalg.norm(np.diff(X_dense, axis=0), axis=1))]
-    )
+    s_dense = arclength(X_dense)
     n_out = max(int(np.floor(s_dense[-1] / spacing_mm)) + 1, 2)
     s_out = np.linspace(0.0, s_dense[-1], n_out)
     t_out = np.interp(s_out, s_dense, t_dense)
@@ -190,16 +188,21 @@ def build_centerline_3d(
     d = spline.derivative()(t_out)
     tangents = d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-12)
 
-    # 2D radii along the matched indices, as functions of the spline parameter
-    rad_a_px = np.interp(t_out, t_k, matching.centerline_a.radius_px[matching.index_a][keep])
-    rad_b_px = np.interp(t_out, t_k, matching.centerline_b.radius_px[matching.index_b][keep])
+    def along(per_point_a: FloatArray, per_point_b: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """Per-2D-point values of A (N_a,) and B (N_b,) at the output points (K,) each,
+        via the matched indices, as functions of the spline parameter."""
+        return (
+            np.interp(t_out, t_k, per_point_a[matching.index_a][keep]),
+            np.interp(t_out, t_k, per_point_b[matching.index_b][keep]),
+        )
+
+    rad_a_px, rad_b_px = along(matching.centerline_a.radius_px, matching.centerline_b.radius_px)
     radius_a_mm = radius_mm_eq11(rad_a_px, X_out, view_a)
     radius_b_mm = radius_mm_eq11(rad_b_px, X_out, view_b)
     overlap_a = np.zeros(len(s_out), dtype=bool)
     overlap_b = np.zeros(len(s_out), dtype=bool)
     if overlap_substitution:
-        rel_a = np.interp(t_out, t_k, matching.centerline_a.reliability[matching.index_a][keep])
-        rel_b = np.interp(t_out, t_k, matching.centerline_b.reliability[matching.index_b][keep])
+        rel_a, rel_b = along(matching.centerline_a.reliability, matching.centerline_b.reliability)
         overlap_a, overlap_b = _overlap_stretches(rel_a, rel_b, spacing_mm)
         # An overlap only widens the fitted lumen: replace where the untrusted view is wider.
         overlap_a &= radius_a_mm > radius_b_mm

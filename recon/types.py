@@ -14,10 +14,11 @@ from scipy.interpolate import make_interp_spline
 
 FloatArray = NDArray[np.float64]
 
-__all__ = ["Centerline2D", "Matching", "Centerline3D"]
+__all__ = ["Centerline2D", "Matching", "Centerline3D", "arclength"]
 
 
-def _arclength(points: FloatArray) -> FloatArray:
+def arclength(points: FloatArray) -> FloatArray:
+    """Cumulative polyline length (N,) from the first of N points (N, D), starting at 0."""
     steps = np.linalg.norm(np.diff(points, axis=0), axis=1)
     return np.concatenate([[0.0], np.cumsum(steps)])
 
@@ -57,7 +58,7 @@ class Centerline2D:
     @property
     def arclength_px(self) -> FloatArray:
         """Cumulative arc length (N,) in pixels from the proximal end."""
-        return _arclength(self.points_px)
+        return arclength(self.points_px)
 
     @property
     def length_px(self) -> float:

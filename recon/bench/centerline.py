@@ -27,6 +27,7 @@ from scipy.spatial import cKDTree
 from recon.centerline import compute_vesselness, trace_segment
 from recon.geometry import ViewGeometry
 from recon.phantom import make_phantom
+from recon.types import arclength
 
 __all__ = ["run", "format_table", "PRESET_CYCLE", "END_EXCLUSION_PX"]
 
@@ -42,7 +43,7 @@ def _dense_truth(
     pts = view.project(X_world)
     depth = view.depth_mm(X_world)
     radius_px = radius_mm * view.sid_mm / depth / float(np.mean(view.pixel_spacing_mm))
-    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(pts, axis=0), axis=1))])
+    s = arclength(pts)
     s_new = np.arange(0.0, s[-1], step_px)
     dense = np.column_stack([np.interp(s_new, s, pts[:, 0]), np.interp(s_new, s, pts[:, 1])])
     return dense, np.interp(s_new, s, radius_px)

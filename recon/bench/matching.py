@@ -47,7 +47,7 @@ from recon.geometry import ViewGeometry
 from recon.matching import MATCHERS, dp_match, match_centerlines
 from recon.phantom import PhantomCase, make_phantom
 from recon.triangulation import build_centerline_3d, point_polyline_distance, table3_metrics
-from recon.types import Centerline2D
+from recon.types import Centerline2D, arclength
 
 __all__ = ["run", "format_table", "time_dp_1000", "foreshortening_ratio", "hard_case_keys"]
 
@@ -68,12 +68,12 @@ def foreshortening_ratio(case: PhantomCase, window_mm: float = HARD_WINDOW_MM) -
     (match2) can follow.
     """
     X = case.truth.segment_X_world  # (M, 3), uniform 3D steps
-    s3 = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(X, axis=0), axis=1))])
+    s3 = arclength(X)
     k = max(1, int(np.searchsorted(s3, window_mm)))
     s2 = []
     for view in (case.view_a, case.view_b_true):
         p = view.project(X)
-        s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(p, axis=0), axis=1))])
+        s = arclength(p)
         s2.append(s / s[-1])
     if len(X) <= k:
         return 1.0
@@ -142,12 +142,12 @@ def _truth_centerline(case: PhantomCase, view: ViewGeometry, rng: np.random.Gene
     """Fallback trace: the true projection at 0.5 px spacing plus noise, brightness from depth."""
     X = case.truth.segment_X_world
     p = view.project(X)
-    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(p, axis=0), axis=1))])
+    s = arclength(p)
     s_new = np.linspace(0.0, s[-1], int(s[-1] / 0.5) + 1)
     pts = np.column_stack([np.interp(s_new, s, p[:, 0]), np.interp(s_new, s, p[:, 1])])
     pts += rng.normal(0.0, FALLBACK_NOISE_PX, pts.shape)
     radius = np.interp(s_new, s, case.truth.segment_radius_px(view))
-    s3 = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(X, axis=0), axis=1))])
+    s3 = arclength(X)
     ds3 = np.gradient(np.interp(s_new, s, s3))
     brightness = 2000.0 - 300.0 * radius * ds3 / np.median(ds3)  # more iodine per pixel
     return Centerline2D(points_px=pts, radius_px=radius, brightness=brightness)
