@@ -36,6 +36,18 @@ Dynamic programming (eqs. 9-10, fig. 5), as implemented by :func:`dp_match`:
   recursion greedy, we keep one TOTAL layer per run length r = 1..max CBOCD
   (an exact DP on the state (i, j, r)).
 
+Narrowing term (our addition, ``narrowing_weight_px``): where the vessel
+runs nearly along the epipolar lines, eq. (8) hardly changes along it, and a
+calibration error of a fraction of a degree slides the correspondence along
+the vessel by millimetres. A stenosis narrows the lumen in both views at the
+same place, so when both traces show a narrowing of at least
+``NARROWING_MIN`` the DP's cost gets w |n_std(i) - n_con(j)|, with n the
+narrowing profile of each trace (:func:`narrowing_profile`) scaled to a peak
+of 1 so that dips of different depth still align. Measured with
+`coronary3d bench reconstruct` (w = 4 px): the largest % diameter-stenosis
+error on seeds 0-11 fell from 14.8 to 7.0 points and data1/120 from 22.7 to
+5.1, while the matching bench's medians moved by less than 0.005 mm.
+
 Sub-pixel refinement (our addition, ``subpixel=True``): the DP picks a
 discrete point j; each matched pair is then moved to the crossing of the
 epipolar line with the constructed polyline next to j (segments j-1..j+1),
@@ -65,11 +77,15 @@ __all__ = [
     "dp_match",
     "deviation_pairs",
     "match_centerlines",
+    "narrowing_profile",
 ]
 
 MATCHERS = ("match1", "match2", "match3", "match4")
 MAX_POINTS = 1000  # the DP is O(N^2) in memory: both traces are resampled to at most this
 FIXED_STEP = 2  # match2's step (CBOCD "other")
+NARROWING_WEIGHT_PX = 4.0  # px of COST per unit of (normalised) narrowing difference; ours
+NARROWING_FIT_ITERATIONS = 5
+NARROWING_MIN = 0.2  # the term is used only when both traces narrow at least this much
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -297,6 +313,30 @@ def _refine_subpixel(
     return out
 
 
+def narrowing_profile(radius_px: ArrayLike) -> FloatArray:
+    """Relative narrowing (N,) in [0, 1] along a trace of uniform arc length: 1 - r / ref.
+
+    ref is a straight line through the radii (N,) fitted robustly: points
+    narrower than 0.9 ref (a lesion) or wider than 1.3 ref (an overlap) are
+    left out and the fit repeated. Only narrowing counts (widening is clipped
+    to 0): a stenosis narrows the lumen in both views at the same place, while
+    an overlap widens it in one view only.
+    """
+    r = np.asarray(radius_px, dtype=float)
+    x = np.arange(len(r), dtype=float)
+    keep = np.isfinite(r) & (r > 0)
+    if np.count_nonzero(keep) < 4:
+        return np.zeros(len(r))
+    ref = np.full(len(r), float(np.median(r[keep])))
+    for _ in range(NARROWING_FIT_ITERATIONS):
+        ref = np.polyval(np.polyfit(x[keep], r[keep], 1), x)
+        new_keep = np.isfinite(r) & (r > 0.9 * ref) & (r < 1.3 * ref)
+        if np.count_nonzero(new_keep) < max(4, len(r) // 3) or np.array_equal(new_keep, keep):
+            break
+        keep = new_keep
+    return np.clip(1.0 - r / np.maximum(ref, 1e-9), 0.0, 1.0)
+
+
 def match_centerlines(
     cl_a: Centerline2D,
     cl_b: Centerline2D,
@@ -311,6 +351,7 @@ def match_centerlines(
     cbocd_options: Mapping[str, Any] | None = None,
     subpixel: bool = True,
     max_points: int = MAX_POINTS,
+    narrowing_weight_px: float = NARROWING_WEIGHT_PX,
 ) -> Matching:
     """Match two traced centerlines point by point (secs. 3.3.1, 3.4).
 
@@ -327,6 +368,10 @@ def match_centerlines(
         (e.g. ``margin_sigma``, ``min_run_px``).
     subpixel : move matched points to the exact epipolar crossing (match2-4).
     max_points : cap on N (both traces are resampled to N points).
+    narrowing_weight_px : weight of the narrowing term added to COST for the
+        dynamic programming (match2, match3; see :func:`narrowing_profile`);
+        0 gives the paper's eq. (8) alone. The deviation pairs and match4 use
+        eq. (8) alone in any case.
 
     Returns
     -------
@@ -358,7 +403,14 @@ def match_centerlines(
             kw = dict(cbocd_options or {}, alpha=alpha, beta_px=beta_px, gamma_px=gamma_px)
             steps_s = cbocd_descriptor(std.points_px, std.brightness, **kw)
             steps_c = cbocd_descriptor(con.points_px, con.brightness, **kw)
-        j = dp_match(cost, steps_s, steps_c)
+        dp_cost = cost
+        n_std = narrowing_profile(std.radius_px)
+        n_con = narrowing_profile(con.radius_px)
+        if narrowing_weight_px > 0 and min(n_std.max(), n_con.max()) >= NARROWING_MIN:
+            # Both views show a lesion: align the dips by shape, whatever each one's depth.
+            n_std, n_con = n_std / n_std.max(), n_con / n_con.max()
+            dp_cost = cost + narrowing_weight_px * np.abs(n_std[:, None] - n_con[None, :])
+        j = dp_match(dp_cost, steps_s, steps_c)
     if subpixel and method != "match1":
         pts_con = _refine_subpixel(lines, con.points_px, j)
     else:

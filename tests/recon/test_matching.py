@@ -6,14 +6,16 @@ import pytest
 from recon.geometry import ViewGeometry, epipolar_lines
 from recon.matching import (
     MATCHERS,
+    NARROWING_WEIGHT_PX,
     MatchingError,
     cost_matrix,
     deviation_pairs,
     dp_match,
     match_centerlines,
+    narrowing_profile,
 )
 from recon.triangulation import build_centerline_3d, point_polyline_distance
-from recon.types import Centerline2D
+from recon.types import Centerline2D, arclength
 
 # Synthetic scene shared with test_triangulation.py (no images).
 # The seed paper's Table 1 (LAO/RAO, CRA/CAU, SID, SOD) for its three data sets.
@@ -312,3 +314,43 @@ def test_match3_follows_an_end_on_ope_where_match2_gets_stuck(name):
             assert m.standard_view == "a" and runs.max() > 2
     assert rms["match3"] < 0.1
     assert rms["match2"] > 3 * rms["match3"]
+
+
+# ------------------------------------------------------------ narrowing term
+def test_narrowing_profile_sees_a_dip_not_a_widening_or_a_taper():
+    x = np.arange(400.0)
+    ref = 5.0 - 0.004 * x  # tapering vessel, px
+    dip = 0.5 * (1 + np.cos(2 * np.pi * np.clip((x - 150) / 40, -0.5, 0.5))) / 2
+    bump = 0.6 * np.exp(-0.5 * ((x - 300) / 6) ** 2)  # an overlap widens one view
+    n = narrowing_profile(ref * (1 - dip) * (1 + bump))
+    assert n[150] == pytest.approx(0.5, abs=0.02)
+    assert np.max(n[np.abs(x - 150) > 25]) < 0.02
+
+
+def _with_dip(cl: Centerline2D, X: np.ndarray, view: ViewGeometry, s0_mm: float) -> Centerline2D:
+    """The trace with a 50 % raised-cosine narrowing, 6 mm long, at 3D arc length s0_mm."""
+    s_3d = arclength(X)
+    s_at = np.interp(arclength(cl.points_px), arclength(view.project(X)), s_3d)
+    u = np.clip((s_at - s0_mm) / 6.0, -0.5, 0.5)
+    radius = cl.radius_px * (1 - 0.5 * (1 + np.cos(2 * np.pi * u)) / 2)
+    return Centerline2D(points_px=cl.points_px, radius_px=radius, brightness=cl.brightness)
+
+
+def test_narrowing_term_keeps_the_lesion_aligned_under_a_calibration_error():
+    """B rotated by 0.8 deg: the epipolar COST alone slides the correspondence along
+    the vessel by ~1.75 mm at the lesion, so the two views' narrowings land at
+    different places of the 3D centerline (and the MLD is overestimated)."""
+    X = coronary_curve("gentle")
+    va, vb = table1_views("data1")
+    vb_wrong = vb.with_correction(np.array([0.0, 0.0, np.deg2rad(0.8)]), np.zeros(3))
+    s0 = 0.5 * arclength(X)[-1]
+    ca = _with_dip(projected_centerline(X, va), X, va, s0)
+    cb = _with_dip(projected_centerline(X, vb), X, vb, s0)
+
+    def gap_mm(weight: float) -> float:
+        m = match_centerlines(ca, cb, va, vb_wrong, method="match3", narrowing_weight_px=weight)
+        c = build_centerline_3d(m, va, vb_wrong)
+        return abs(c.s_mm[np.argmin(c.radius_a_mm)] - c.s_mm[np.argmin(c.radius_b_mm)])
+
+    assert gap_mm(0.0) > 1.0
+    assert gap_mm(NARROWING_WEIGHT_PX) <= 0.3
