@@ -43,6 +43,14 @@ two ways, both reported:
 - "oracle": the true correspondences (the same 3D sample in both views),
   an upper bound for a perfect matcher.
 
+Landmarks (``landmarks`` in the result): the same PALM calibration with more
+clicked landmarks than the seeds hold, spread over the tree: the seeds'
+clicks plus the distal ends of the side branches, then also both ends of the
+main vessel (true projections with the phantom's click noise). The two views
+of one short segment leave the pose weakly determined across the baseline
+(a rotation of B about the axis normal to both beams trades against a
+translation of B in their plane); landmarks spread wider pin it down.
+
 Two reference poses bound what any calibration from two views can reach
 (:func:`reference_poses`): the TRUE rotation and the true translation
 across the baseline (everything observable, exact), with the unobservable
@@ -67,7 +75,7 @@ from recon.calibration import (
     refine_with_matches,
 )
 from recon.geometry import ViewGeometry, epipolar_lines, rotvec_from_rotation, triangulate
-from recon.phantom import PhantomCase, make_phantom
+from recon.phantom import CLICK_NOISE_PX, CLICK_ROUND_PX, PhantomCase, make_phantom
 
 __all__ = ["run", "format_table", "pose_errors", "epipolar_pairs", "reference_poses"]
 
@@ -78,6 +86,7 @@ SUCCESS_PX = 0.5
 MATCH_NOISE_PX = 0.3
 MATCH_STEP_MM = 1.0
 ANNEAL_RUNS_PER_GEOMETRY = 5
+LANDMARK_SETS = ("seeds", "branch_ends", "branch_and_main_ends")
 
 
 def pose_errors(
@@ -168,6 +177,7 @@ def _record(
         "error_after_mm": result.error_after_mm,
         "converged": result.converged,
         **errors,
+        "backprojection_ok": result.error_after_px < SUCCESS_PX,
         "pose_better_than_header": errors["translation_error_mm"] <= header["translation_error_mm"],
         "success": result.error_after_px < SUCCESS_PX
         and errors["translation_error_mm"] <= header["translation_error_mm"],
@@ -195,6 +205,7 @@ def _summary(records: list[dict]) -> dict:
         "success_rate": rate("success"),
         "converged_rate": rate("converged"),
         "pose_better_than_header_rate": rate("pose_better_than_header"),
+        "backprojection_ok_rate": rate("backprojection_ok"),
         "median_rotation_error_deg": med("rotation_error_deg"),
         "median_translation_error_mm": med("translation_error_mm"),
         "median_raw_translation_error_mm": med("raw_translation_error_mm"),
@@ -247,6 +258,25 @@ def _matched_curves(
     return noisy_a, noisy_b, true_a, true_b
 
 
+def extra_landmarks(
+    case: PhantomCase, rng: np.random.Generator, main_ends: bool
+) -> tuple[FloatArray, FloatArray]:
+    """Clicks (L, 2) in A and B on the side branches' distal ends (and the main vessel's ends).
+
+    True projections plus the phantom's click noise, rounded as the phantom's seeds are.
+    """
+    vessels = case.truth.vessels
+    X = [v[0][-1] for v in vessels[1:]]
+    if main_ends:
+        X += [vessels[0][0][0], vessels[0][0][-1]]
+    X_world = np.asarray(X, dtype=float).reshape(-1, 3)
+    clicks = []
+    for view in (case.view_a, case.view_b_true):
+        p = view.project(X_world) + rng.normal(0.0, CLICK_NOISE_PX, (len(X_world), 2))
+        clicks.append(np.round(p / CLICK_ROUND_PX) * CLICK_ROUND_PX)
+    return clicks[0], clicks[1]
+
+
 def run(
     runs_per_geometry: int = 50,
     seed: int = 0,
@@ -266,6 +296,8 @@ def run(
     ref_header: list[dict] = []
     ref_prior: list[dict] = []
     n_features: list[int] = []
+    landmarks: dict[str, list[dict]] = {k: [] for k in LANDMARK_SETS}
+    n_landmarks: dict[str, list[int]] = {k: [] for k in LANDMARK_SETS}
     for geometry in GEOMETRIES:
         for i in range(runs_per_geometry):
             case = make_phantom(geometry, seed * 10000 + i, render=False)
@@ -293,6 +325,19 @@ def run(
             if palm_result is None:
                 palm_result = calibrate(case.view_a, case.view_b_nominal, pa, pb)
             features_only.append(pose_errors(palm_result.view_b, case.view_b_true, case.view_a, X))
+            landmark_rng = np.random.default_rng([seed, i, GEOMETRIES.index(geometry), 1])
+            for key in LANDMARK_SETS:
+                la, lb = pa, pb
+                if key != "seeds":
+                    ea, eb = extra_landmarks(
+                        case, landmark_rng, main_ends=key == "branch_and_main_ends"
+                    )
+                    la, lb = np.vstack([pa, ea]), np.vstack([pb, eb])
+                result = palm_result
+                if key != "seeds":
+                    result = calibrate(case.view_a, case.view_b_nominal, la, lb)
+                landmarks[key].append(_record(result, case, header))
+                n_landmarks[key].append(len(la))
             noisy_a, noisy_b, _, _ = _matched_curves(case, rng)
             for kind, (ma, mb) in (
                 ("epipolar", epipolar_pairs(noisy_a, noisy_b, case.view_a, palm_result.view_b)),
@@ -335,6 +380,10 @@ def run(
             "reference_gauge_at_header": _pose_summary(ref_header, header_records),
             "reference_gauge_from_priors": _pose_summary(ref_prior, header_records),
             "runs": len(header_records),
+        },
+        "landmarks": {
+            key: {**_summary(landmarks[key]), "median_landmarks": float(np.median(n))}
+            for key, n in n_landmarks.items()
         },
         "success_px": SUCCESS_PX,
         "elapsed_s": time.perf_counter() - start,
@@ -400,6 +449,25 @@ def format_table(result: dict) -> str:
             f"{s['median_translation_error_mm']:>9.2f} "
             f"{s['median_raw_translation_error_mm']:>9.2f} "
             f"{s['median_reconstruction_error_mm']:>9.2f} {better:>13} {recon:>13} {pairs:>6}"
+        )
+    lines += [
+        "",
+        "Landmarks (PALM, clicks spread over the tree; 'bp ok' = back-projection < "
+        f"{result['success_px']} px):",
+        f"{'clicks':<26} {'K':>3} {'rot deg':>8} {'trans mm':>9} {'recon mm':>9} "
+        f"{'trans<header':>13} {'bp ok':>6} {'success':>8}",
+    ]
+    for label, key in (
+        ("seeds (ends, bifurcations)", "seeds"),
+        ("+ branch ends", "branch_ends"),
+        ("+ branch and main ends", "branch_and_main_ends"),
+    ):
+        s = result["landmarks"][key]
+        lines.append(
+            f"{label:<26} {s['median_landmarks']:>3.0f} {s['median_rotation_error_deg']:>8.3f} "
+            f"{s['median_translation_error_mm']:>9.2f} {s['median_reconstruction_error_mm']:>9.2f} "
+            f"{s['pose_better_than_header_rate']:>13.2f} {s['backprojection_ok_rate']:>6.2f} "
+            f"{s['success_rate']:>8.2f}"
         )
     lines.append(
         "trans = mean displacement of the segment under the rig error; recon = mean 3D error "

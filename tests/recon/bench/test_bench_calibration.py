@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from recon.bench.calibration import pose_errors, reference_poses
+from recon.bench.calibration import extra_landmarks, pose_errors, reference_poses
 from recon.calibration import CalibrationPriors, backprojection_residuals_px
 from recon.phantom import make_phantom
 
@@ -49,3 +49,17 @@ def test_pose_errors_vanish_for_the_true_pose() -> None:
         case.view_b_true, case.view_b_true, case.view_a, case.truth.segment_X_world
     )
     assert all(v < 1e-6 for v in errors.values())
+
+
+def test_extra_landmarks_are_noisy_clicks_on_the_vessel_ends() -> None:
+    case = make_phantom("data1", 2, render=False)
+    rng = np.random.default_rng(0)
+    n_branches = len(case.truth.vessels) - 1
+    la, lb = extra_landmarks(case, rng, main_ends=False)
+    assert la.shape == lb.shape == (n_branches, 2)
+    ends = np.array([v[0][-1] for v in case.truth.vessels[1:]])
+    assert np.max(np.abs(la - case.view_a.project(ends))) < 4.0  # 0.7 px sd clicks
+    assert np.max(np.abs(lb - case.view_b_true.project(ends))) < 4.0
+    assert not np.allclose(la, case.view_a.project(ends))  # noise is there
+    la2, _ = extra_landmarks(case, rng, main_ends=True)
+    assert la2.shape == (n_branches + 2, 2)
