@@ -746,7 +746,10 @@ class ViewerApp:
         if hasattr(self, "_gui"):
             self._gui["results_md"].content = "No reconstruction yet."
             self._gui["calib_md"].content = (
-                "Not calibrated: epipolar lines use the header geometry."
+                "Not calibrated: epipolar lines use the header geometry.\n\n"
+                "Tip: landmarks spread over the image (branch points and vessel ends far "
+                "from the lesion) fix view B's pose better than clicks near the lesion "
+                "(`coronary3d bench calibration`, landmark rows)."
             )
             self._gui["plot"].visible = False
 
