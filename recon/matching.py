@@ -327,7 +327,6 @@ def narrowing_profile(radius_px: ArrayLike) -> FloatArray:
     keep = np.isfinite(r) & (r > 0)
     if np.count_nonzero(keep) < 4:
         return np.zeros(len(r))
-    ref = np.full(len(r), float(np.median(r[keep])))
     for _ in range(NARROWING_FIT_ITERATIONS):
         ref = np.polyval(np.polyfit(x[keep], r[keep], 1), x)
         new_keep = np.isfinite(r) & (r > 0.9 * ref) & (r < 1.3 * ref)
@@ -404,12 +403,13 @@ def match_centerlines(
             steps_s = cbocd_descriptor(std.points_px, std.brightness, **kw)
             steps_c = cbocd_descriptor(con.points_px, con.brightness, **kw)
         dp_cost = cost
-        n_std = narrowing_profile(std.radius_px)
-        n_con = narrowing_profile(con.radius_px)
-        if narrowing_weight_px > 0 and min(n_std.max(), n_con.max()) >= NARROWING_MIN:
-            # Both views show a lesion: align the dips by shape, whatever each one's depth.
-            n_std, n_con = n_std / n_std.max(), n_con / n_con.max()
-            dp_cost = cost + narrowing_weight_px * np.abs(n_std[:, None] - n_con[None, :])
+        if narrowing_weight_px > 0:
+            n_std = narrowing_profile(std.radius_px)
+            n_con = narrowing_profile(con.radius_px)
+            if min(n_std.max(), n_con.max()) >= NARROWING_MIN:
+                # Both views show a lesion: align the dips by shape, whatever each one's depth.
+                n_std, n_con = n_std / n_std.max(), n_con / n_con.max()
+                dp_cost = cost + narrowing_weight_px * np.abs(n_std[:, None] - n_con[None, :])
         j = dp_match(dp_cost, steps_s, steps_c)
     if subpixel and method != "match1":
         pts_con = _refine_subpixel(lines, con.points_px, j)

@@ -90,6 +90,7 @@ __all__ = [
     "HEADER_SOD_ERROR_MM",
     "HEADER_SHIFT_MM",
     "CLICK_NOISE_PX",
+    "click_px",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -536,10 +537,14 @@ def _main_reference_radius(tree: _TreeDraw, s_mm: float) -> float:
 
 
 # ------------------------------------------------------------- seeds
-def _click(rng: np.random.Generator, points_px: FloatArray) -> list[tuple[float, float]]:
+def click_px(rng: np.random.Generator, points_px: FloatArray) -> FloatArray:
+    """Clicks (N, 2) on points (N, 2): CLICK_NOISE_PX noise, stored to CLICK_ROUND_PX."""
     noisy = points_px + rng.normal(0.0, CLICK_NOISE_PX, points_px.shape)
-    noisy = np.round(noisy / CLICK_ROUND_PX) * CLICK_ROUND_PX
-    return [(round(float(c), 1), round(float(r), 1)) for c, r in noisy]
+    return np.round(noisy / CLICK_ROUND_PX) * CLICK_ROUND_PX
+
+
+def _click(rng: np.random.Generator, points_px: FloatArray) -> list[tuple[float, float]]:
+    return [(round(float(c), 1), round(float(r), 1)) for c, r in click_px(rng, points_px)]
 
 
 def _make_seeds(

@@ -75,7 +75,7 @@ from recon.calibration import (
     refine_with_matches,
 )
 from recon.geometry import ViewGeometry, epipolar_lines, rotvec_from_rotation, triangulate
-from recon.phantom import CLICK_NOISE_PX, CLICK_ROUND_PX, PhantomCase, make_phantom
+from recon.phantom import PhantomCase, click_px, make_phantom
 
 __all__ = ["run", "format_table", "pose_errors", "epipolar_pairs", "reference_poses"]
 
@@ -263,18 +263,15 @@ def extra_landmarks(
 ) -> tuple[FloatArray, FloatArray]:
     """Clicks (L, 2) in A and B on the side branches' distal ends (and the main vessel's ends).
 
-    True projections plus the phantom's click noise, rounded as the phantom's seeds are.
+    True projections clicked as the phantom clicks its seeds (:func:`recon.phantom.click_px`).
     """
     vessels = case.truth.vessels
     X = [v[0][-1] for v in vessels[1:]]
     if main_ends:
         X += [vessels[0][0][0], vessels[0][0][-1]]
     X_world = np.asarray(X, dtype=float).reshape(-1, 3)
-    clicks = []
-    for view in (case.view_a, case.view_b_true):
-        p = view.project(X_world) + rng.normal(0.0, CLICK_NOISE_PX, (len(X_world), 2))
-        clicks.append(np.round(p / CLICK_ROUND_PX) * CLICK_ROUND_PX)
-    return clicks[0], clicks[1]
+    clicks_a = click_px(rng, case.view_a.project(X_world))
+    return clicks_a, click_px(rng, case.view_b_true.project(X_world))
 
 
 def run(
