@@ -61,6 +61,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import dual_annealing, least_squares
 
+from recon.errors import CoronaryError
 from recon.geometry import ViewGeometry, rotvec_from_rotation, view_separation_deg
 
 __all__ = [
@@ -92,7 +93,7 @@ _GTOL = 1e-10  # gradient, px^2 per sigma
 _COMPLEX_STEP = 1e-30
 
 
-class CalibrationError(ValueError):
+class CalibrationError(CoronaryError):
     """Corresponding points or options that cannot calibrate; one line naming the problem."""
 
 

@@ -26,6 +26,7 @@ from scipy import ndimage as ndi
 from scipy.interpolate import splev, splprep
 from skimage.graph import route_through_array
 
+from recon.errors import CoronaryError
 from recon.types import Centerline2D, arclength
 
 __all__ = [
@@ -66,7 +67,7 @@ _RADIUS_TOL = 0.15
 _RSS_TOL = 3.0
 
 
-class TraceError(ValueError):
+class TraceError(CoronaryError):
     """A click or segment that cannot be traced; the one-line message names the view and click."""
 
 

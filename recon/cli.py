@@ -15,30 +15,13 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 
+from recon.errors import CoronaryError
+
 EXIT_USER_ERROR = 2
 
 DEMO_DIR = Path(__file__).resolve().parent.parent / "assets" / "demo"
 
 BENCHES = ("centerline", "calibration", "matching", "reconstruct")
-
-
-def _user_error_types() -> tuple[type[BaseException], ...]:
-    """The project's user-facing error classes (imported lazily: start-up stays fast)."""
-    from recon.seeds import SeedsError
-
-    types: list[type[BaseException]] = [SeedsError]
-    for module, name in (
-        ("recon.dicom_io", "LoadError"),
-        ("recon.centerline", "TraceError"),
-        ("recon.calibration", "CalibrationError"),
-        ("recon.pipeline", "PipelineError"),
-    ):
-        try:
-            mod = __import__(module, fromlist=[name])
-            types.append(getattr(mod, name))
-        except (ImportError, AttributeError):
-            pass
-    return tuple(types)
 
 
 def _add_geometry_options(p: argparse.ArgumentParser) -> None:
@@ -336,13 +319,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         return COMMANDS[args.command](args)
     except KeyboardInterrupt:
         return 130
-    except Exception as exc:
+    except CoronaryError as exc:
         if os.environ.get("CORONARY3D_DEBUG"):
             raise
-        if isinstance(exc, _user_error_types()) or isinstance(exc, OSError):
-            print(f"coronary3d: error: {exc}", file=sys.stderr)
-            return EXIT_USER_ERROR
-        raise
+        print(f"coronary3d: error: {exc}", file=sys.stderr)
+        return EXIT_USER_ERROR
 
 
 if __name__ == "__main__":

@@ -67,6 +67,7 @@ from pydicom.encaps import encapsulate
 from pydicom.uid import UID, ExplicitVRLittleEndian, generate_uid
 from scipy import ndimage
 
+from recon.errors import CoronaryError
 from recon.fileio import read_json
 from recon.geometry import ViewGeometry
 
@@ -117,7 +118,7 @@ _GEOMETRY_KEYS = tuple(f[0] for f in _GEOMETRY_FIELDS)
 _TOLERATED_JSON_KEYS = ("rows", "cols", "principal_offset_px", "rotvec_corr", "t_corr_mm")
 
 
-class LoadError(ValueError):
+class LoadError(CoronaryError):
     """An input image or geometry that cannot be used; one line "<file>: <what is wrong>"."""
 
 

@@ -65,6 +65,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from recon.cbocd import BETA_PX, GAMMA_PX, cbocd_descriptor
+from recon.errors import CoronaryError
 from recon.geometry import ViewGeometry, epipolar_lines, point_line_distance_px
 from recon.types import Centerline2D, Matching
 
@@ -91,7 +92,7 @@ FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 
 
-class MatchingError(ValueError):
+class MatchingError(CoronaryError):
     """Matching cannot be done on these inputs; the message says why."""
 
 

@@ -70,6 +70,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import ndimage
 
+from recon.errors import CoronaryError
 from recon.fileio import atomic_write_bytes
 from recon.geometry import ViewGeometry, rotation_from_rotvec, rotvec_from_rotation
 from recon.seeds import Feature, Seeds, Segment, save_seeds
@@ -135,7 +136,7 @@ BACKGROUND_LEVEL = 2600.0  # 12-bit value of unattenuated background
 MAX_VALUE = 4095
 
 
-class PhantomError(ValueError):
+class PhantomError(CoronaryError):
     """A phantom request that cannot be served (bad preset, unreadable truth file)."""
 
 

@@ -25,6 +25,7 @@ from recon import __version__
 from recon.calibration import CalibrationResult, calibrate, refine_with_matches
 from recon.centerline import VesselnessMap, compute_vesselness, trace_segment
 from recon.dicom_io import Angiogram
+from recon.errors import CoronaryError
 from recon.fileio import atomic_write_bytes
 from recon.geometry import ViewGeometry, view_separation_deg
 from recon.matching import match_centerlines
@@ -59,7 +60,7 @@ CENTERLINE_COLUMNS = (
 )
 
 
-class PipelineError(ValueError):
+class PipelineError(CoronaryError):
     """The inputs cannot be reconstructed (one line: what and why)."""
 
 

@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from recon.errors import CoronaryError
 from recon.fileio import atomic_write_bytes, read_json
 
 __all__ = [
@@ -36,7 +37,7 @@ __all__ = [
 ]
 
 
-class SeedsError(ValueError):
+class SeedsError(CoronaryError):
     """A seeds file or object that cannot be used; the message names what is wrong."""
 
 

@@ -30,6 +30,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.interpolate import make_smoothing_spline
 from scipy.ndimage import binary_dilation
 
+from recon.errors import CoronaryError
 from recon.geometry import ViewGeometry, ray_distance_mm, triangulate
 from recon.types import Centerline3D, Matching, arclength
 
@@ -50,7 +51,7 @@ OVERLAP_RELIABILITY = 0.5
 OVERLAP_MARGIN_MM = 1.0
 
 
-class TriangulationError(ValueError):
+class TriangulationError(CoronaryError):
     """The matched pairs cannot make a 3D centerline; the message says why."""
 
 
