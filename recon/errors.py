@@ -9,8 +9,16 @@ subclass so that a test or a caller can tell the stages apart.
 
 from __future__ import annotations
 
-__all__ = ["CoronaryError"]
+__all__ = ["CoronaryError", "LoadError", "OutputError"]
 
 
 class CoronaryError(ValueError):
     """A user's mistake (bad file, bad click, impossible geometry): a one-line message."""
+
+
+class LoadError(CoronaryError):
+    """An input image or geometry that cannot be used; one line "<file>: <what is wrong>"."""
+
+
+class OutputError(CoronaryError):
+    """An output that cannot be written; one line "<path>: <what is wrong>"."""
