@@ -19,8 +19,6 @@ from recon.errors import CoronaryError
 
 EXIT_USER_ERROR = 2
 
-DEMO_DIR = Path(__file__).resolve().parent.parent / "assets" / "demo"
-
 BENCHES = ("centerline", "calibration", "matching", "reconstruct")
 
 
@@ -44,7 +42,7 @@ def _add_geometry_options(p: argparse.ArgumentParser) -> None:
 
 def _overrides(args: argparse.Namespace):
     """GeometryOverrides from the command-line options (None when none given)."""
-    from recon.dicom_io import GeometryOverrides
+    from recon.io.overrides import GeometryOverrides
 
     json_path = getattr(args, "geometry_json", None)
     from_json = GeometryOverrides.from_json(json_path) if json_path else None
@@ -162,7 +160,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 # ----------------------------------------------------------------- commands
 def cmd_info(args: argparse.Namespace) -> int:
-    from recon.dicom_io import LoadError, describe_file, format_description
+    from recon.errors import LoadError
+    from recon.io.describe import describe_file, format_description
 
     overrides = _overrides(args)
     failed = False
@@ -187,7 +186,8 @@ def cmd_info(args: argparse.Namespace) -> int:
 
 
 def cmd_phantom(args: argparse.Namespace) -> int:
-    from recon.phantom import PRESETS, make_phantom, write_phantom_case
+    from recon.io.phantom_case import write_phantom_case
+    from recon.synth import PRESETS, make_phantom
 
     if args.preset not in PRESETS:
         print(
@@ -206,15 +206,17 @@ def cmd_phantom(args: argparse.Namespace) -> int:
 
 
 def cmd_reconstruct(args: argparse.Namespace) -> int:
-    from recon.dicom_io import load_angiogram
-    from recon.pipeline import ReconstructionOptions, reconstruct_pair, write_outputs
-    from recon.seeds import load_seeds
-    from recon.surface import MESH_FORMATS
+    from recon.io.angiogram import load_angiogram
+    from recon.io.demo import demo_paths
+    from recon.io.outputs import MESH_FORMATS, write_outputs
+    from recon.io.seeds_file import load_seeds
+    from recon.pipeline import ReconstructionOptions, reconstruct_pair
 
     if args.demo:
-        file_a = args.file_a or str(DEMO_DIR / "a.dcm")
-        file_b = args.file_b or str(DEMO_DIR / "b.dcm")
-        seeds_path = args.seeds or str(DEMO_DIR / "seeds.json")
+        demo = demo_paths()
+        file_a = args.file_a or str(demo["a"])
+        file_b = args.file_b or str(demo["b"])
+        seeds_path = args.seeds or str(demo["seeds"])
     else:
         file_a, file_b, seeds_path = args.file_a, args.file_b, args.seeds
         if not (file_a and file_b and seeds_path):
@@ -264,14 +266,16 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
 
 
 def cmd_view(args: argparse.Namespace) -> int:
+    from recon.io.demo import demo_paths
     from viewer_app import run_viewer
 
     if bool(args.file_a) != bool(args.file_b):
         print("coronary3d: error: view needs two files A B, or none for the demo", file=sys.stderr)
         return EXIT_USER_ERROR
-    file_a = args.file_a or str(DEMO_DIR / "a.dcm")
-    file_b = args.file_b or str(DEMO_DIR / "b.dcm")
-    seeds = args.seeds or (None if args.file_a else str(DEMO_DIR / "seeds.json"))
+    demo = demo_paths() if not args.file_a else None
+    file_a = args.file_a or str(demo["a"])
+    file_b = args.file_b or str(demo["b"])
+    seeds = args.seeds or (str(demo["seeds"]) if demo else None)
     run_viewer(
         file_a,
         file_b,
@@ -285,17 +289,12 @@ def cmd_view(args: argparse.Namespace) -> int:
 
 def cmd_bench(args: argparse.Namespace) -> int:
     import importlib
-    import inspect
 
     module = importlib.import_module(f"recon.bench.{args.name}")
-    kwargs: dict[str, int] = {"seed": args.seed}
-    if args.cases is not None:
-        first = next(iter(inspect.signature(module.run).parameters))  # cases / runs_per_geometry
-        kwargs[first] = args.cases
-    result = module.run(**kwargs)
+    result = module.run(cases=args.cases, seed=args.seed)
     print(module.format_table(result))
     if args.json:
-        from recon.fileio import atomic_write_bytes
+        from recon.io.files import atomic_write_bytes
 
         atomic_write_bytes(
             Path(args.json), (json.dumps(result, indent=2, default=float) + "\n").encode()

@@ -159,11 +159,6 @@ class ViewGeometry:
         return self.R_corr @ d_nominal + np.asarray(self.t_corr_mm)
 
     @property
-    def isocenter_world(self) -> FloatArray:
-        """The (corrected) isocenter (3,) in world mm."""
-        return np.asarray(self.t_corr_mm, dtype=float)
-
-    @property
     def centre_px(self) -> tuple[float, float]:
         """Principal point (col, row) in pixels."""
         return (
@@ -226,10 +221,6 @@ class ViewGeometry:
         m = self.normalized_coords(points_px)
         x_view = np.column_stack([m, np.ones(len(m))]) * self.sid_mm
         return x_view @ self.R_view_from_world + self.source_world
-
-    def magnification_at(self, X_world: ArrayLike) -> FloatArray:
-        """Geometric magnification SID / depth (N,) of world points."""
-        return self.sid_mm / self.depth_mm(X_world)
 
     # ------------------------------------------------------------ changes
     def with_correction(self, rotvec: ArrayLike, t_mm: ArrayLike) -> ViewGeometry:

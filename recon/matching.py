@@ -43,10 +43,8 @@ the vessel by millimetres. A stenosis narrows the lumen in both views at the
 same place, so when both traces show a narrowing of at least
 ``NARROWING_MIN`` the DP's cost gets w |n_std(i) - n_con(j)|, with n the
 narrowing profile of each trace (:func:`narrowing_profile`) scaled to a peak
-of 1 so that dips of different depth still align. Measured with
-`coronary3d bench reconstruct` (w = 4 px): the largest % diameter-stenosis
-error on seeds 0-11 fell from 14.8 to 7.0 points and data1/120 from 22.7 to
-5.1, while Match 3's medians on the matching bench moved by less than 0.005 mm.
+of 1 so that dips of different depth still align (its effect is measured
+in docs/benchmarks.md).
 
 Sub-pixel refinement (our addition, ``subpixel=True``): the DP picks a
 discrete point j; each matched pair is then moved to the crossing of the

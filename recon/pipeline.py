@@ -1,39 +1,40 @@
-"""The whole reconstruction, top to bottom, and its output files.
+"""The whole reconstruction, top to bottom.
 
 ``reconstruct_pair`` is the one function that runs every stage in order;
 the command line (`coronary3d reconstruct`) and the viewer both call it.
 
     trace both views -> calibrate view B on the clicked features (PALM, eq. 5)
-    -> match (CBOCD + DP, eqs. 6-10) -> recalibrate with deviation pairs
-       (sec. 3.4.2) and refine over the matched points -> match again
+    -> match (CBOCD + DP, eqs. 6-10)
     -> triangulate + smooth (eqs. 2-3) -> elliptic sections + surface
        (sec. 3.5, eq. 11) -> 3D measurements
+
+Self-calibration (off by default, ``ReconstructionOptions.self_calibration``)
+adds, after the first matching, a recalibration with the deviation pairs
+(sec. 3.4.2), a refinement over the matched points and a second matching.
+
+The output files (centerline CSV, report JSON, meshes) are written by
+:mod:`recon.io.outputs`.
 """
 
 from __future__ import annotations
 
-import io
-import json
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
 from recon import __version__
 from recon.calibration import CalibrationResult, calibrate, refine_with_matches
 from recon.centerline import VesselnessMap, compute_vesselness, trace_segment
-from recon.dicom_io import Angiogram
 from recon.errors import CoronaryError
-from recon.fileio import atomic_write_bytes
 from recon.geometry import ViewGeometry, view_separation_deg
 from recon.matching import match_centerlines
 from recon.measure import LumenProfile, Measurements, lumen_profile, measure_lumen
 from recon.seeds import Seeds
-from recon.surface import SurfaceResult, build_surface, export_mesh
+from recon.surface import SurfaceResult, build_surface
 from recon.triangulation import build_centerline_3d, table3_metrics
-from recon.types import Centerline2D, Centerline3D, Matching
+from recon.types import Angiogram, Centerline2D, Centerline3D, Matching
 
 __all__ = [
     "PipelineError",
@@ -41,24 +42,9 @@ __all__ = [
     "Reconstruction",
     "calibrate_from_seeds",
     "reconstruct_pair",
-    "outputs_as_bytes",
-    "write_outputs",
 ]
 
 Progress = Callable[[str, float], None]
-
-CENTERLINE_COLUMNS = (
-    "s_mm",
-    "x_mm",
-    "y_mm",
-    "z_mm",
-    "radius_mm",
-    "diameter_mm",
-    "area_mm2",
-    "radius_a_mm",
-    "radius_b_mm",
-)
-
 
 class PipelineError(CoronaryError):
     """The inputs cannot be reconstructed (one line: what and why)."""
@@ -66,17 +52,15 @@ class PipelineError(CoronaryError):
 
 @dataclass(frozen=True)
 class ReconstructionOptions:
-    """Choices a user can make; the defaults are the paper's method plus self-calibration.
+    """Choices a user can make; the defaults are the paper's method without self-calibration.
 
     matcher : "match1".."match4" (the paper's names; match3 = CBOCD adaptive-step DP).
     optimizer : "palm", "lm" or "anneal" (the paper's Optimize 3, 2, 1).
     segment : index of the seeds segment to reconstruct.
     self_calibration : after matching, recalibrate with the deviation pairs
         (sec. 3.4.2) and refine over the matched centerline points. Off by
-        default: on the phantom benchmark (`coronary3d bench reconstruct`) it
-        did not bring view B's pose nearer the truth (75 % -> 67 % of cases
-        better than the header, 3D error 0.51 -> 0.55 mm without the baseline
-        scale), because the pairs are matched under the geometry being refined.
+        default: the pairs are matched under the geometry being refined, so
+        they largely agree with it (docs/benchmarks.md has the measurement).
     spacing_mm : arc-length spacing of the 3D centerline.
     voxel_mm : surface grid size (None: chosen from the vessel radius).
     """
@@ -359,63 +343,3 @@ def _self_calibrate(
     matching = match_centerlines(cl_a, cl_b, view_a, cal.view_b, method=options.matcher)
     return cal, matching, steps
 
-
-# --------------------------------------------------------------------- output
-def centerline_csv(rec: Reconstruction) -> bytes:
-    """centerline.csv: header line then one row per point, proximal to distal."""
-    cl = rec.centerline_3d
-    area = rec.surface.sections.area_mm2
-    table = np.column_stack(
-        [
-            cl.s_mm,
-            cl.X_world,
-            np.sqrt(area / np.pi),
-            rec.profile.diameter_mm,
-            area,
-            cl.radius_a_mm,
-            cl.radius_b_mm,
-        ]
-    )
-    buf = io.StringIO()
-    buf.write(",".join(CENTERLINE_COLUMNS) + "\n")
-    np.savetxt(buf, table, delimiter=",", fmt="%.4f")
-    return buf.getvalue().encode()
-
-
-def outputs_as_bytes(rec: Reconstruction, formats: tuple[str, ...] = ("stl",)) -> dict[str, bytes]:
-    """Every output file as bytes, keyed by file name (the viewer's downloads)."""
-    files = {"centerline.csv": centerline_csv(rec)}
-    for fmt in formats:
-        files[f"mesh.{fmt}"] = export_mesh(rec.surface.mesh, fmt)
-    report = json.dumps(rec.report(), indent=2, default=_json_default)
-    files["report.json"] = (report + "\n").encode()
-    files["seeds.json"] = (json.dumps(rec.seeds.to_dict(), indent=2) + "\n").encode()
-    return files
-
-
-def write_outputs(
-    rec: Reconstruction, out_dir: Path, formats: tuple[str, ...] = ("stl",)
-) -> list[Path]:
-    """Write the outputs into ``out_dir``; each file appears whole or not at all.
-
-    Every file is rendered to bytes first, so a failure leaves no file behind.
-    """
-    files = outputs_as_bytes(rec, formats)
-    files.pop("seeds.json")
-    out_dir = Path(out_dir)
-    written = []
-    for name, data in files.items():
-        path = out_dir / name
-        atomic_write_bytes(path, data)
-        written.append(path)
-    return written
-
-
-def _json_default(value: object) -> object:
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, tuple):
-        return list(value)
-    return str(value)

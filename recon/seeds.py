@@ -1,4 +1,4 @@
-"""The clinician's marks (seeds.json): read, validate, write.
+"""The clinician's marks (seeds.json): the dataclasses and their validation.
 
 Format (version 1), pixel coordinates (col, row) 0-based as in the C-arm
 convention::
@@ -8,32 +8,26 @@ convention::
      "features": [{"name": "D1 bifurcation", "a": [c, r], "b": [c, r]}]}
 
 In each segment the first point is proximal, the last distal, the points
-between are waypoints; only the ends correspond between views.
+between are waypoints; only the ends correspond between views. Reading and
+writing the file is :mod:`recon.io.seeds_file`.
 """
 
 from __future__ import annotations
 
-import json
 import math
-import os
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
 
 from recon.errors import CoronaryError
-from recon.fileio import atomic_write_bytes, read_json
 
 __all__ = [
     "Segment",
     "Feature",
     "Seeds",
     "SeedsError",
-    "load_seeds",
-    "save_seeds",
     "seeds_from_dict",
-    "atomic_write_bytes",
 ]
 
 
@@ -150,12 +144,3 @@ def seeds_from_dict(data: object, source: str = "seeds") -> Seeds:
         )
     return Seeds(segments=tuple(segments), features=tuple(features))
 
-
-def load_seeds(path: str | os.PathLike) -> Seeds:
-    """Read and validate a seeds.json file. Raises SeedsError naming the file."""
-    return seeds_from_dict(read_json(path, SeedsError, "seeds file"), source=str(Path(path)))
-
-
-def save_seeds(seeds: Seeds, path: str | os.PathLike) -> None:
-    """Write seeds atomically (temporary file in the same folder, then rename)."""
-    atomic_write_bytes(Path(path), (json.dumps(seeds.to_dict(), indent=2) + "\n").encode())

@@ -33,18 +33,15 @@ from recon.types import Centerline3D, arclength
 FloatArray = NDArray[np.float64]
 
 __all__ = [
-    "MESH_FORMATS",
     "CrossSections",
     "SurfaceResult",
     "elliptic_cross_sections",
     "build_surface",
-    "export_mesh",
     "section_points",
     "intersection_directions",
     "default_voxel_mm",
 ]
 
-MESH_FORMATS: tuple[str, ...] = ("stl", "obj", "ply", "glb")
 
 # Below this sine of the angle between the two intersection lines the minor
 # semi-axis is not observable from them; between the two bounds the solved
@@ -79,11 +76,6 @@ class CrossSections:
 
     def __len__(self) -> int:
         return len(self.centers)
-
-    @property
-    def equivalent_diameter_mm(self) -> FloatArray:
-        """Diameter (M,) of the circle with the same area, 2 sqrt(a b)."""
-        return 2.0 * np.sqrt(self.major_mm * self.minor_mm)
 
 
 @dataclass(frozen=True, eq=False)
@@ -505,24 +497,3 @@ def build_surface(
     mesh = _repair(mesh)
     return SurfaceResult(mesh=mesh, sections=sections, point_cloud=cloud, voxel_mm=voxel)
 
-
-# ---------------------------------------------------------------- export
-def export_mesh(mesh: trimesh.Trimesh, fmt: str) -> bytes:
-    """Serialise a mesh to bytes: "stl" (binary), "obj", "ply" (binary) or "glb".
-
-    Raises ValueError naming the supported formats for any other ``fmt``.
-    """
-    key = str(fmt).lower().lstrip(".")
-    if key not in MESH_FORMATS:
-        raise ValueError(
-            f"unknown mesh format {fmt!r}; supported formats: {', '.join(MESH_FORMATS)}"
-        )
-    if key == "ply":
-        data = mesh.export(file_type="ply", encoding="binary")
-    elif key == "obj":
-        data = mesh.export(file_type="obj", include_normals=True)
-    else:
-        data = mesh.export(file_type=key)
-    if isinstance(data, str):
-        data = data.encode("utf-8")
-    return bytes(data)

@@ -17,10 +17,7 @@ Steps of :func:`build_centerline_3d`:
    untrusted radius is the larger, the trusted view's radius stands in for
    both ellipse axes (a circular lumen is the best guess when one view
    cannot see the width). The stretches are widened by ``OVERLAP_MARGIN_MM``
-   and returned as ``overlap_a``/``overlap_b``; the report lists them. On the
-   12 benchmark cases this changes the median MLD and %DS errors by less
-   than 0.01 mm and 0.1 points; single overlapped cases gain (data2/1: MLD
-   error 0.21 -> 0.17 mm).
+   and returned as ``overlap_a``/``overlap_b``; the report lists them.
 """
 
 from __future__ import annotations
@@ -144,9 +141,8 @@ def build_centerline_3d(
     smoothing_mm : bandwidth of the smoothing spline along the vessel. The
         penalty is lam = (points per mm) * smoothing_mm**4 (a cubic smoothing
         spline's equivalent kernel width scales as (lam / density)^(1/4)).
-        Measured on the phantoms (`coronary3d bench reconstruct`): ~1 mm
-        removes the depth noise that inflated the length by 1-4 % under GCV,
-        keeps a 6 mm stenosis, and costs ~5 ms instead of 200-500 ms for GCV.
+        A fixed bandwidth replaces generalised cross-validation (GCV), which
+        followed the depth noise (docs/benchmarks.md).
     weighted : weight each raw point by its conditioning, sin^2 of the angle
         between the vessel and the epipolar plane (see :func:`epipolar_weights`);
         a trace error of d px moves the point by about d / sin(angle).

@@ -1,20 +1,82 @@
 """Small frozen dataclasses that pass between pipeline stages.
 
 Each stage module owns its own result types; the ones here cross stage
-boundaries (traced 2D centerline -> matching -> 3D centerline -> surface).
+boundaries (loaded angiogram -> traced 2D centerline -> matching -> 3D
+centerline -> surface).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy.interpolate import make_interp_spline
 
+from recon.errors import LoadError
+from recon.geometry import ViewGeometry
+
 FloatArray = NDArray[np.float64]
 
-__all__ = ["Centerline2D", "Matching", "Centerline3D", "arclength"]
+__all__ = ["Angiogram", "Centerline2D", "Matching", "Centerline3D", "arclength"]
+
+
+@dataclass(frozen=True, eq=False)
+class Angiogram:
+    """One loaded angiogram: the chosen frame, its geometry and provenance.
+
+    Attributes
+    ----------
+    image : (H, W) float32, the chosen frame, MONOCHROME2 sense (vessels
+        dark), raw stored values.
+    geometry : the view's nominal :class:`ViewGeometry` (rows, cols = H, W).
+    path : the file it came from.
+    frame_index : 0-based index of ``image`` in the run.
+    frame_reason : why this frame ("explicit", "RepresentativeFrameNumber 5",
+        "end-diastolic: R wave at frame 20 ...", "strongest vessel contrast",
+        "single frame").
+    n_frames : number of frames in the file.
+    frame_time_ms : FrameTime, or None.
+    frames : (F, H, W) float32 of the whole run, or None for a single frame.
+    geometry_notes : how geometry values that are not plain header tags were
+        obtained (overrides, fallbacks).
+    info : header facts (sop_class, sop_class_name, modality, rows, cols,
+        bits_stored, photometric, transfer_syntax, r_wave_pointer (1-based,
+        raw), r_wave_frames (0-based), representative_frame_number, ...).
+    """
+
+    image: NDArray[np.float32]
+    geometry: ViewGeometry
+    path: str
+    frame_index: int
+    frame_reason: str
+    n_frames: int
+    frame_time_ms: float | None = None
+    frames: NDArray[np.float32] | None = None
+    geometry_notes: tuple[str, ...] = ()
+    info: dict = field(default_factory=dict)
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """(H, W) of the image."""
+        return (int(self.image.shape[0]), int(self.image.shape[1]))
+
+    def with_frame(self, index: int) -> Angiogram:
+        """The same run with frame ``index`` (0-based) as the image; reason "explicit"."""
+        index = _check_frame_index(index, self.n_frames, self.path)
+        image = self.image if self.frames is None else self.frames[index]
+        return replace(self, image=image, frame_index=index, frame_reason="explicit")
+
+
+def _check_frame_index(index: object, n_frames: int, path: str) -> int:
+    if isinstance(index, bool) or not isinstance(index, (int, np.integer)):
+        raise LoadError(f"{path}: frame must be an integer index, got {index!r}")
+    if not 0 <= int(index) < n_frames:
+        raise LoadError(
+            f"{path}: frame {int(index)} is out of range; the file has {n_frames} "
+            f"frame{'s' if n_frames != 1 else ''} (0-based: 0..{n_frames - 1})"
+        )
+    return int(index)
 
 
 def arclength(points: FloatArray) -> FloatArray:
@@ -37,6 +99,12 @@ class Centerline2D:
     reliability : (N,) confidence in (0, 1] of the profile fit behind each
         point's centre and radius (1 = one clean tube; low where another
         vessel overlaps or touches); all ones when not given.
+    intensity_mapping : "lin" or "log": how the stored values were taken to
+        relate to attenuation (None when not recorded).
+    intensity_reason : one line saying why that mapping (tag, override, or
+        what the vessel profiles showed), or None.
+    intensity_power : Box-Cox power of the stored values the radius fit used
+        (0 = -log, values linear in intensity; 1 = linear in attenuation), or None.
     """
 
     points_px: FloatArray
@@ -44,6 +112,9 @@ class Centerline2D:
     brightness: FloatArray
     clicks_px: FloatArray = field(default_factory=lambda: np.zeros((0, 2)))
     reliability: FloatArray | None = None
+    intensity_mapping: str | None = None
+    intensity_reason: str | None = None
+    intensity_power: float | None = None
 
     def __post_init__(self) -> None:
         n = len(self.points_px)

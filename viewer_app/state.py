@@ -30,8 +30,8 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from recon.fileio import atomic_write_bytes
 from recon.geometry import ViewGeometry, epipolar_lines
+from recon.io.files import atomic_write_bytes
 from recon.seeds import Feature, Seeds, Segment, seeds_from_dict
 
 __all__ = [

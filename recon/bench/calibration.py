@@ -1,15 +1,16 @@
 """`coronary3d bench calibration`: the paper's Table 2 (Optimize 1-3) on phantom cases.
 
-Cases: the three geometries of the paper's Table 1 (``recon.phantom.PRESETS``
+Cases: the three geometries of the paper's Table 1 (``recon.synth.PRESETS``
 "data1", "data2", "data3"), ``runs_per_geometry`` phantom seeds each
-(``seed * 10000 + i``), each with its own random header error of view B
-(``recon.phantom.random_header_error``). Features are the seeds' clicks
+(``seed * 10000 + i``; ``run(cases=N)`` sets it, default
+:data:`RUNS_PER_GEOMETRY`), each with its own random header error of view B
+(``recon.synth.random_header_error``). Features are the seeds' clicks
 (``Seeds.correspondences()``: segment ends and bifurcations, with the
 phantom's click noise), so K is small (3-5) and the pose is partly fixed by
 the priors.
 
 For each run and method ("palm" = Optimize 3, "lm" = Optimize 2, "anneal" =
-Optimize 1; annealing only on the first ``anneal_runs_per_geometry`` runs of
+Optimize 1; annealing only on the first :data:`ANNEAL_RUNS_PER_GEOMETRY` runs of
 each geometry because it takes ~0.5 s a run) we record the back-projection
 error of eq. (5) before and after (px, and mm on the detector as in Table 2),
 the time, the iterations, and the TRUE pose error of the calibrated view B
@@ -18,7 +19,8 @@ against the phantom's ``view_b_true``:
 - ``rotation_error_deg``: angle of R_est R_true^T;
 - ``translation_error_mm``: mean 3D displacement of the truth's segment
   points under the rig error (the motion carrying the true rig onto the
-  estimated one), i.e. how far the segment moves relative to B's rig;
+  estimated one), i.e. how far the segment moves relative to B's rig
+  (both by :func:`recon.bench.common.pose_error`);
 - ``raw_translation_error_mm``: |t_est - t_true| (isocenter positions);
 - ``reconstruction_error_mm``: mean 3D distance between the truth's segment
   points and their triangulation (eqs. 2-3) from their exact projections
@@ -68,14 +70,15 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import NDArray
 
+from recon.bench.common import pose_error
 from recon.calibration import (
     CalibrationPriors,
     CalibrationResult,
     calibrate,
     refine_with_matches,
 )
-from recon.geometry import ViewGeometry, epipolar_lines, rotvec_from_rotation, triangulate
-from recon.phantom import PhantomCase, click_px, make_phantom
+from recon.geometry import ViewGeometry, epipolar_lines, triangulate
+from recon.synth import PhantomCase, click_px, make_phantom
 
 __all__ = ["run", "format_table", "pose_errors", "epipolar_pairs", "reference_poses"]
 
@@ -85,6 +88,8 @@ GEOMETRIES = ("data1", "data2", "data3")
 SUCCESS_PX = 0.5
 MATCH_NOISE_PX = 0.3
 MATCH_STEP_MM = 1.0
+RUNS_PER_GEOMETRY = 50  # phantom seeds per geometry when run(cases=None)
+METHODS = ("palm", "lm", "anneal")
 ANNEAL_RUNS_PER_GEOMETRY = 5
 LANDMARK_SETS = ("seeds", "branch_ends", "branch_and_main_ends")
 
@@ -93,14 +98,13 @@ def pose_errors(
     view_b: ViewGeometry, view_b_true: ViewGeometry, view_a: ViewGeometry, X_world: FloatArray
 ) -> dict[str, float]:
     """True-pose errors of a calibrated view B (see the module docstring); X_world (P, 3)."""
-    R_err = view_b.R_corr @ view_b_true.R_corr.T
+    rotation_deg, translation_mm = pose_error(view_b, view_b_true, X_world)
     t_est = np.asarray(view_b.t_corr_mm)
     t_true = np.asarray(view_b_true.t_corr_mm)
-    moved = (X_world - t_true) @ R_err.T + t_est
     X_rec = triangulate(view_a.project(X_world), view_b_true.project(X_world), view_a, view_b)
     return {
-        "rotation_error_deg": float(np.degrees(np.linalg.norm(rotvec_from_rotation(R_err)))),
-        "translation_error_mm": float(np.mean(np.linalg.norm(moved - X_world, axis=1))),
+        "rotation_error_deg": rotation_deg,
+        "translation_error_mm": translation_mm,
         "raw_translation_error_mm": float(np.linalg.norm(t_est - t_true)),
         "reconstruction_error_mm": float(np.mean(np.linalg.norm(X_rec - X_world, axis=1))),
     }
@@ -263,7 +267,7 @@ def extra_landmarks(
 ) -> tuple[FloatArray, FloatArray]:
     """Clicks (L, 2) in A and B on the side branches' distal ends (and the main vessel's ends).
 
-    True projections clicked as the phantom clicks its seeds (:func:`recon.phantom.click_px`).
+    True projections clicked as the phantom clicks its seeds (:func:`recon.synth.click_px`).
     """
     vessels = case.truth.vessels
     X = [v[0][-1] for v in vessels[1:]]
@@ -274,13 +278,17 @@ def extra_landmarks(
     return clicks_a, click_px(rng, case.view_b_true.project(X_world))
 
 
-def run(
-    runs_per_geometry: int = 50,
-    seed: int = 0,
-    methods: Sequence[str] = ("palm", "lm", "anneal"),
-    anneal_runs_per_geometry: int = ANNEAL_RUNS_PER_GEOMETRY,
-) -> dict:
-    """Run the benchmark; returns a JSON-ready dict (see the module docstring)."""
+def run(cases: int | None = None, seed: int = 0) -> dict:
+    """Run the benchmark; returns a JSON-ready dict (see the module docstring).
+
+    Parameters
+    ----------
+    cases : runs (phantom seeds) per geometry; None: :data:`RUNS_PER_GEOMETRY`.
+    seed : case i of a geometry uses phantom seed ``seed * 10000 + i``.
+    """
+    runs_per_geometry = RUNS_PER_GEOMETRY if cases is None else cases
+    methods: Sequence[str] = METHODS
+    anneal_runs_per_geometry = ANNEAL_RUNS_PER_GEOMETRY
     start = time.perf_counter()
     per_method: dict[str, list[dict]] = {m: [] for m in methods}
     per_geometry: dict[str, dict[str, list[dict]]] = {

@@ -24,14 +24,15 @@ import time
 import numpy as np
 from scipy.spatial import cKDTree
 
+from recon.bench.common import PRESET_CYCLE
 from recon.centerline import compute_vesselness, trace_segment
 from recon.geometry import ViewGeometry
-from recon.phantom import make_phantom
+from recon.synth import make_phantom
 from recon.types import arclength
 
-__all__ = ["run", "format_table", "PRESET_CYCLE", "END_EXCLUSION_PX"]
+__all__ = ["run", "format_table", "PRESET_CYCLE", "END_EXCLUSION_PX", "CASES"]
 
-PRESET_CYCLE = ("data1", "data2", "data3", "static")
+CASES = 10  # phantom cases when run(cases=None)
 #: Arc length (px) left out of the radius error at both ends of each trace.
 END_EXCLUSION_PX = 3.0
 
@@ -77,12 +78,13 @@ def _evaluate_view(
     }
 
 
-def run(cases: int = 10, seed: int = 0) -> dict:
+def run(cases: int | None = None, seed: int = 0) -> dict:
     """Trace the phantom segment in both views of ``cases`` cases.
 
     Parameters
     ----------
-    cases : number of phantom cases; presets cycle through :data:`PRESET_CYCLE`.
+    cases : number of phantom cases (None: :data:`CASES`); presets cycle
+        through :data:`PRESET_CYCLE`.
     seed : seed of the first case (case k uses seed + k).
 
     Returns
@@ -91,6 +93,7 @@ def run(cases: int = 10, seed: int = 0) -> dict:
     "vesselness_ms", "trace_ms" (over cases and both views), "rows" (one per
     case and view), "failures" (traces that raised) and "notes".
     """
+    cases = CASES if cases is None else cases
     rows: list[dict] = []
     failures: list[dict] = []
     for k in range(cases):

@@ -26,7 +26,7 @@ true projected centerlines plus 0.3 px noise and is labelled
 
 Hard cases. The cycle above rarely foreshortens a vessel much more in one
 view than in the other, so the DP's step limit is almost never tested there.
-``run(hard_cases=K)`` adds K cases picked by a deterministic screen of the
+:data:`HARD_CASES` cases are added, picked by a deterministic screen of the
 phantom trees (no rendering, :func:`foreshortening_ratio`): for each
 preset, seeds ``seed .. seed + HARD_SCREEN_SEEDS - 1`` are ranked by the
 largest ratio between the two views' local 2D stretch (over 3 mm of vessel,
@@ -46,18 +46,20 @@ import time
 
 import numpy as np
 
+from recon.bench.common import PRESET_CYCLE
 from recon.calibration import calibrate
 from recon.cbocd import cbocd_parts
 from recon.centerline import TraceError, trace_segment
 from recon.geometry import ViewGeometry
 from recon.matching import MATCHERS, dp_match, match_centerlines
-from recon.phantom import PhantomCase, make_phantom
+from recon.synth import PhantomCase, make_phantom
 from recon.triangulation import build_centerline_3d, point_polyline_distance, table3_metrics
 from recon.types import Centerline2D, arclength
 
 __all__ = ["run", "format_table", "time_dp_1000", "foreshortening_ratio", "hard_case_keys"]
 
-PRESET_CYCLE = ("data1", "data2", "data3", "static")
+CASES = 10  # regular phantom cases when run(cases=None)
+HARD_CASES = 8  # strongly foreshortened cases added to the regular ones
 FALLBACK_NOISE_PX = 0.3
 HARD_SCREEN_SEEDS = 40  # seeds screened per preset for the hard cases
 HARD_MIN_RATIO = 6.0  # a stretch 6x shorter in one view than in the other
@@ -279,8 +281,11 @@ def _summary(records: list[dict]) -> dict:
     return methods
 
 
-def run(cases: int = 10, seed: int = 0, hard_cases: int = 8) -> dict:
-    """Run the benchmark on ``cases`` phantom cases plus ``hard_cases``; JSON-ready dict.
+def run(cases: int | None = None, seed: int = 0) -> dict:
+    """Run the benchmark on ``cases`` phantom cases plus :data:`HARD_CASES`; JSON-ready dict.
+
+    ``cases`` None means :data:`CASES`; the regular cases cycle through
+    :data:`PRESET_CYCLE` with seeds ``seed, seed + 1, ...`` (one per cycle).
 
     Returns
     -------
@@ -290,10 +295,10 @@ def run(cases: int = 10, seed: int = 0, hard_cases: int = 8) -> dict:
     cases, "methods_all": over both, "dp_ms_1000": float, "cases": [per-case
     records], "n_cases": int, "n_hard": int, "n_fallback": int}
     """
+    cases = CASES if cases is None else cases
+    hard_cases = HARD_CASES
     if cases < 1:
         raise ValueError(f"cases must be at least 1, got {cases}")
-    if hard_cases < 0:
-        raise ValueError(f"hard_cases must be at least 0, got {hard_cases}")
     records = []
     regular = set()
     for k in range(cases):

@@ -4,7 +4,8 @@ For each synthetic case (the paper's Table 1 geometries and the static
 preset, several seeds) the full `reconstruct_pair` runs from the rendered
 images, the header geometry and the noisy clicks, and its results are
 compared with the truth: 3D centerline error, MLD, % diameter stenosis,
-segment length, mesh volume, and the true-pose error of calibrated view B.
+segment length, mesh volume, and the true-pose error of calibrated view B
+(:func:`recon.bench.common.pose_error`).
 """
 
 from __future__ import annotations
@@ -14,12 +15,15 @@ import time
 import numpy as np
 from scipy.spatial import cKDTree
 
-from recon.dicom_io import Angiogram
+from recon.bench.common import PRESET_CYCLE, pose_error
 from recon.geometry import ViewGeometry
-from recon.phantom import PhantomCase, make_phantom
 from recon.pipeline import ReconstructionOptions, reconstruct_pair
+from recon.synth import PhantomCase, make_phantom
+from recon.types import Angiogram
 
-PRESET_CYCLE = ("data1", "data2", "data3", "static")
+CASES = 8  # phantom cases when run(cases=None)
+STENOSIS_PCT = 50.0  # diameter stenosis of every case
+SELF_CALIBRATION = False  # ReconstructionOptions.self_calibration of the runs
 
 
 def _angiogram(image: np.ndarray, view: ViewGeometry, name: str) -> Angiogram:
@@ -41,19 +45,6 @@ def polyline_distance_mm(points: np.ndarray, truth_dense: np.ndarray) -> np.ndar
     """Distance (N,) from points (N, 3) to a densely sampled polyline (M, 3)."""
     dist, _ = cKDTree(truth_dense).query(points)
     return dist
-
-
-def pose_error(view_est: ViewGeometry, view_true: ViewGeometry, X_world: np.ndarray
-               ) -> tuple[float, float]:
-    """(rotation error deg, mean displacement mm of X_world) between two rigs."""
-    R_rel = view_est.R_corr @ view_true.R_corr.T
-    rot_deg = float(np.degrees(np.arccos(np.clip((np.trace(R_rel) - 1) / 2, -1, 1))))
-    # Where the same pixel rays land: compare the rigs' motion of the segment points.
-    def moved(v: ViewGeometry) -> np.ndarray:
-        return X_world @ v.R_corr.T + np.asarray(v.t_corr_mm)
-
-    disp = float(np.mean(np.linalg.norm(moved(view_est) - moved(view_true), axis=1)))
-    return rot_deg, disp
 
 
 def scale_free_rms_mm(X_world: np.ndarray, truth_dense: np.ndarray, source_a: np.ndarray
@@ -128,9 +119,15 @@ def evaluate_case(case: PhantomCase, options: ReconstructionOptions) -> dict:
     }
 
 
-def run(cases: int = 8, seed: int = 0, stenosis_pct: float = 50.0,
-        self_calibration: bool = False) -> dict:
-    """Run the end-to-end benchmark on ``cases`` phantom cases; medians and rows."""
+def run(cases: int | None = None, seed: int = 0) -> dict:
+    """Run the end-to-end benchmark on ``cases`` phantom cases; medians and rows.
+
+    ``cases`` None means :data:`CASES`; case k is preset ``PRESET_CYCLE[k % 4]``
+    with seed ``seed + k``.
+    """
+    cases = CASES if cases is None else cases
+    stenosis_pct = STENOSIS_PCT
+    self_calibration = SELF_CALIBRATION
     options = ReconstructionOptions(self_calibration=self_calibration)
     rows = []
     failures = []

@@ -4,11 +4,11 @@ import pytest
 from recon.calibration import (
     CalibrationError,
     CalibrationPriors,
-    _Model,
     backprojection_residuals_px,
     calibrate,
     refine_with_matches,
 )
+from recon.calibration_model import ResidualModel
 from recon.geometry import ViewGeometry, rotvec_from_rotation
 
 # Data 1 of the seed paper's Table 1.
@@ -56,7 +56,7 @@ def test_model_matches_geometry_triangulation():
     from recon.geometry import triangulate
 
     truth, X, pa, pb = make_case(7)
-    model = _Model(VIEW_A, truth, pa, pb, np.ones(7), CalibrationPriors(), False)
+    model = ResidualModel(VIEW_A, truth, pa, pb, np.ones(7), CalibrationPriors(), False)
     proj_a, proj_b = model.project_pairs(np.zeros((1, 6)))
     X_tri = triangulate(pa, pb, VIEW_A, truth, method="paper")
     assert np.allclose(X_tri, X, atol=1e-6)
@@ -72,7 +72,7 @@ def test_jacobian_matches_central_differences(priors, intrinsics):
     if priors is None and intrinsics:
         return
     truth, X, pa, pb = make_case(9, noise_px=0.5)
-    model = _Model(VIEW_A, VIEW_B, pa, pb, np.linspace(0.5, 2, 9), priors, intrinsics)
+    model = ResidualModel(VIEW_A, VIEW_B, pa, pb, np.linspace(0.5, 2, 9), priors, intrinsics)
     z = np.random.default_rng(3).normal(0, 0.4, model.n_params)
     r, J = model.residuals_and_jacobian(z)
     assert np.allclose(r, model.residuals(z[None])[0], rtol=0, atol=1e-10)

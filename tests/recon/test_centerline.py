@@ -223,10 +223,9 @@ REAL_CLICKS = {  # a clear tube in each view of the static phantom (col, row)
 
 @pytest.mark.parametrize("name", sorted(REAL_CLICKS))
 def test_real_static_phantom_trace_stays_on_tube(name: str) -> None:
-    dicom_io = pytest.importorskip("recon.dicom_io")
-    if not hasattr(dicom_io, "load_angiogram"):
-        pytest.skip("recon.dicom_io.load_angiogram not written yet")
-    image = np.asarray(dicom_io.load_angiogram(DATA / name).image, dtype=float)
+    from recon.io import load_angiogram
+
+    image = np.asarray(load_angiogram(DATA / name).image, dtype=float)
     vmap = compute_vesselness(image)
     assert vmap.response[~vmap.valid].max() == 0.0
     assert not vmap.valid[:, :8].any() and not vmap.valid[-6:].any()  # collimator border
@@ -243,8 +242,9 @@ def test_real_static_phantom_trace_stays_on_tube(name: str) -> None:
 
 # ------------------------------------------------------------------ phantom
 def test_phantom_trace_matches_projected_truth() -> None:
-    phantom = pytest.importorskip("recon.phantom")
-    case = phantom.make_phantom("data2", 1, render=True)
+    from recon.synth import make_phantom
+
+    case = make_phantom("data2", 1, render=True)
     X_world, radius_mm = case.truth.vessels[0]  # the whole main vessel
     pts = case.view_a.project(X_world)
     s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(pts, axis=0), axis=1))])

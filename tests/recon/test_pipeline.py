@@ -9,17 +9,13 @@ import trimesh
 
 from recon.bench.reconstruct import evaluate_case
 from recon.centerline import compute_vesselness
-from recon.dicom_io import load_angiogram
 from recon.geometry import ViewGeometry, fundamental_matrix
-from recon.phantom import make_phantom
-from recon.pipeline import (
-    PipelineError,
-    ReconstructionOptions,
-    outputs_as_bytes,
-    reconstruct_pair,
-    write_outputs,
-)
-from recon.seeds import Seeds, load_seeds
+from recon.io.angiogram import load_angiogram
+from recon.io.outputs import outputs_as_bytes, write_outputs
+from recon.io.seeds_file import load_seeds
+from recon.pipeline import PipelineError, ReconstructionOptions, reconstruct_pair
+from recon.seeds import Seeds
+from recon.synth import make_phantom
 
 DATA = Path(__file__).resolve().parent.parent / "data"
 

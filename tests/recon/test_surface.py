@@ -1,17 +1,12 @@
-import io
-
 import numpy as np
 import pytest
-import trimesh
 
 from recon.geometry import ViewGeometry
 from recon.surface import (
-    MESH_FORMATS,
     CrossSections,
     SurfaceResult,
     build_surface,
     elliptic_cross_sections,
-    export_mesh,
     intersection_directions,
 )
 from recon.types import Centerline3D
@@ -227,27 +222,3 @@ def test_tapering_stenosed_tube_is_closed():
     res = build_surface(centerline(X, r, 0.9 * r), VIEW_A, VIEW_B)
     assert_clean_closed_mesh(res.mesh)
 
-
-# ---------------------------------------------------------------- export
-@pytest.fixture(scope="module")
-def tube_mesh():
-    return build_surface(centerline(straight(length=20.0), 1.5), VIEW_A, VIEW_B).mesh
-
-
-@pytest.mark.parametrize("fmt", MESH_FORMATS)
-def test_export_round_trip(tube_mesh, fmt):
-    data = export_mesh(tube_mesh, fmt)
-    assert isinstance(data, bytes) and len(data) > 0
-    loaded = trimesh.load(io.BytesIO(data), file_type=fmt, force="mesh")
-    loaded.merge_vertices()
-    assert loaded.is_watertight
-    assert len(loaded.faces) == len(tube_mesh.faces)
-    assert loaded.volume == pytest.approx(tube_mesh.volume, rel=1e-5)
-    if fmt == "stl":
-        assert data[:80] != b"solid" and len(data) == 84 + 50 * len(tube_mesh.faces)
-        assert len(loaded.vertices) == len(tube_mesh.vertices)
-
-
-def test_export_unknown_format_lists_the_formats(tube_mesh):
-    with pytest.raises(ValueError, match="stl, obj, ply, glb"):
-        export_mesh(tube_mesh, "vtk")

@@ -7,7 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from viewer_app import DEMO_DIR, ViewerApp
+from recon.io import demo_paths
+from viewer_app import ViewerApp
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -23,7 +24,7 @@ def artifacts_dir() -> Path:
 @pytest.fixture(scope="session")
 def demo_case() -> dict[str, Path]:
     """assets/demo/a.dcm, b.dcm, seeds.json (the case `coronary3d view` opens by default)."""
-    paths = {k: DEMO_DIR / n for k, n in (("a", "a.dcm"), ("b", "b.dcm"), ("seeds", "seeds.json"))}
+    paths = {k: v for k, v in demo_paths().items() if k in ("a", "b", "seeds")}
     missing = [str(p) for p in paths.values() if not p.is_file()]
     assert not missing, f"demo case missing: {', '.join(missing)}"
     return paths

@@ -11,7 +11,8 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-from recon.seeds import load_seeds, seeds_from_dict
+from recon.io import load_seeds
+from recon.seeds import seeds_from_dict
 from viewer_app import ViewerApp, run_viewer
 
 
@@ -45,8 +46,8 @@ def test_clicks_snap_to_the_vessel_and_draw_the_epipolar_line(
     assert mark.point_px != mark.raw_px
     epi = app.epipolar_segments
     assert epi["a"] is None and epi["b"] is not None
-    assert app.views["a"].handles["marks"].points.shape == (1, 3)
-    assert app.views["b"].handles["epipolar"].points.shape == (1, 2, 3)
+    assert app.views["a"].nodes.marks.points.shape == (1, 3)
+    assert app.views["b"].nodes.epipolar.points.shape == (1, 2, 3)
     timings_ms = [app.last_click_ms]
     for dx in (-1.0, 0.5, 1.0, -0.5):  # more clicks for the figure in the report
         app.click("a", col + dx, row + dx)
@@ -71,7 +72,7 @@ def test_clicks_snap_to_the_vessel_and_draw_the_epipolar_line(
     assert len(app.seeds().features) == 0
     app.clear()
     assert app.state.marks == []
-    assert app.views["a"].handles["marks"].points.shape == (0, 3)
+    assert app.views["a"].nodes.marks.points.shape == (0, 3)
 
 
 def test_calibration_moves_epipolar_lines_onto_the_partner_points(app: ViewerApp) -> None:
@@ -93,7 +94,7 @@ def test_calibration_moves_epipolar_lines_onto_the_partner_points(app: ViewerApp
     assert res is not None, app.notifications[-1:]
     after = worst_distance()
     assert after < 2.0 < before
-    assert "error (px)" in app._gui["calib_md"].content
+    assert "error (px)" in app.panels.calibrate.markdown.content
 
 
 def test_reconstruct_then_export(app: ViewerApp) -> None:
@@ -103,11 +104,11 @@ def test_reconstruct_then_export(app: ViewerApp) -> None:
     assert stages[0] != stages[-1] and app.progress_log[-1][1] == 1.0
     assert len(rec.surface.mesh.faces) > 100
     for key in ("a", "b"):  # traced and back-projected centerlines on both images
-        assert len(app.views[key].handles["trace"].points) > 10
-        assert len(app.views[key].handles["backproj"].points) > 10
-    table = app._gui["results_md"].content
+        assert len(app.views[key].nodes.trace.points) > 10
+        assert len(app.views[key].nodes.backproj.points) > 10
+    table = app.panels.results.markdown.content
     assert table.startswith("| measurement | value |") and "| Table 3 |" in table
-    assert app._gui["plot"].visible
+    assert app.panels.results.plot.visible
 
     stl = app.export("stl")
     mesh = trimesh.load(io.BytesIO(stl), file_type="stl")
@@ -205,13 +206,13 @@ def test_cine_frame_slider_and_missing_geometry(tmp_path: Path) -> None:
     app = ViewerApp(str(data / "IM7.dcm"), str(data / "IM8.dcm"), None, host="127.0.0.1",
                     port=0, autosave_path=tmp_path / "auto.json")
     try:
-        slider = app._gui["frame_a"]
+        slider = app.panels.case.views["a"].frame
         assert slider.visible and slider.max == 8
         assert slider.value == app.views["a"].angio.frame_index  # the loader's chosen frame
-        before = app.views["a"].handles["image"].image.copy()
+        before = app.views["a"].nodes.image.image.copy()
         slider.value = 1  # as if the user dragged it
         assert app.views["a"].angio.frame_index == 1
-        assert not np.array_equal(app.views["a"].handles["image"].image, before)
+        assert not np.array_equal(app.views["a"].nodes.image.image, before)
         # A real clinical cine without SID/SOD/spacing: an error notification, the app lives on.
         assert app.open_pair(str(data / "rca-cine-ecg.dcm"), str(data / "IM8.dcm")) is False
         level, _, body = app.notifications[-1]

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from recon.seeds import load_seeds
+from recon.io import load_seeds
 from viewer_app import ViewerApp
 
 CHROMIUM = "/usr/bin/chromium"

@@ -7,7 +7,7 @@ import pytest
 
 from recon.bench.calibration import extra_landmarks, pose_errors, reference_poses
 from recon.calibration import CalibrationPriors, backprojection_residuals_px
-from recon.phantom import make_phantom
+from recon.synth import make_phantom
 
 
 @pytest.mark.parametrize("preset", ["data1", "data3"])

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from recon.bench.matching import evaluate_case, foreshortening_ratio
-from recon.phantom import make_phantom
+from recon.synth import make_phantom
 
 
 def test_evaluate_case_separates_tracing_from_matching() -> None:

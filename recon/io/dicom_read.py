@@ -1,0 +1,222 @@
+"""Read a projection X-ray DICOM file (XA, and RF/DX/CR/SC) into a raw record.
+
+Pixels are decoded by pydicom (uncompressed, JPEG Lossless, JPEG Baseline or
+what pylibjpeg decodes) and kept as raw stored values in float32, no rescale
+and no windowing; MONOCHROME1 is inverted on reading so that contrast-filled
+vessels are dark (the MONOCHROME2 sense). Geometry tags are read from the top
+level or from the first item of the functional groups of enhanced objects.
+R Wave Pointer frame numbers (1-based) are converted to 0-based
+``info["r_wave_frames"]``; the raw values stay in ``info["r_wave_pointer"]``.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from typing import Any
+
+import numpy as np
+import pydicom
+from pydicom.dataset import Dataset
+from pydicom.uid import UID
+
+from recon.errors import LoadError
+from recon.io.image_files import IMAGE_SUFFIXES
+from recon.io.raw import RawFile, first_line
+
+__all__ = ["XA_SOP_CLASS_UID", "read_dicom"]
+
+XA_SOP_CLASS_UID = "1.2.840.10008.5.1.4.1.1.12.1"  # X-Ray Angiographic Image Storage
+
+# Projection X-ray SOP classes this loader reads. XA is the target; the others
+# (enhanced XA, radiofluoroscopic, DX, CR, secondary capture) are accepted when
+# the geometry is present in the header or supplied by the user.
+_PROJECTION_SOP_CLASSES = {
+    XA_SOP_CLASS_UID,
+    "1.2.840.10008.5.1.4.1.1.12.1.1",  # Enhanced XA Image Storage
+    "1.2.840.10008.5.1.4.1.1.12.2",  # X-Ray Radiofluoroscopic Image Storage
+    "1.2.840.10008.5.1.4.1.1.12.2.1",  # Enhanced XRF Image Storage
+    "1.2.840.10008.5.1.4.1.1.1",  # Computed Radiography Image Storage
+    "1.2.840.10008.5.1.4.1.1.1.1",  # Digital X-Ray Image Storage - For Presentation
+    "1.2.840.10008.5.1.4.1.1.1.1.1",  # Digital X-Ray Image Storage - For Processing
+    "1.2.840.10008.5.1.4.1.1.7",  # Secondary Capture Image Storage
+    "1.2.840.10008.5.1.4.1.1.7.2",  # Multi-frame Grayscale Byte SC Image Storage
+    "1.2.840.10008.5.1.4.1.1.7.3",  # Multi-frame Grayscale Word SC Image Storage
+}
+_PROJECTION_MODALITIES = {"XA", "RF", "DX", "CR", "OT"}
+
+
+def _dicom_value(ds: Dataset, keyword: str) -> Any:
+    """A tag's value from the top level, or from the first item of the
+    shared / per-frame functional groups (enhanced multi-frame objects)."""
+    if keyword in ds and ds[keyword].value not in (None, ""):
+        return ds[keyword].value
+    for group in ("SharedFunctionalGroupsSequence", "PerFrameFunctionalGroupsSequence"):
+        seq = ds.get(group)
+        if not seq:
+            continue
+        for macro in seq[0]:
+            if macro.VR != "SQ" or not macro.value:
+                continue
+            item = macro.value[0]
+            if keyword in item and item[keyword].value not in (None, ""):
+                return item[keyword].value
+    return None
+
+
+def _as_float(value: Any) -> float | None:
+    if value is None:
+        return None
+    try:
+        if isinstance(value, (list, tuple, pydicom.multival.MultiValue)):
+            value = value[0]
+        out = float(value)
+    except (TypeError, ValueError, IndexError):
+        return None
+    return out if math.isfinite(out) else None
+
+
+def _as_floats(value: Any) -> tuple[float, ...] | None:
+    if value is None:
+        return None
+    if not isinstance(value, (list, tuple, pydicom.multival.MultiValue)):
+        value = [value]
+    try:
+        out = tuple(float(v) for v in value)
+    except (TypeError, ValueError):
+        return None
+    return out if out and all(math.isfinite(v) for v in out) else None
+
+
+def _as_ints(value: Any) -> list[int]:
+    if value is None:
+        return []
+    if not isinstance(value, (list, tuple, pydicom.multival.MultiValue)):
+        value = [value]
+    out = []
+    for v in value:
+        try:
+            out.append(int(v))
+        except (TypeError, ValueError):
+            continue
+    return out
+
+
+def read_dicom(path: str) -> RawFile:
+    """Frames, header geometry and facts of a DICOM file; LoadError for what cannot be used."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        try:
+            ds = pydicom.dcmread(path)
+        except pydicom.errors.InvalidDicomError:
+            raise LoadError(
+                f"{path}: not a DICOM file (no DICM preamble) and not an image file "
+                f"({', '.join(sorted(IMAGE_SUFFIXES))})"
+            ) from None
+        except Exception as exc:  # truncated or corrupt header
+            raise LoadError(
+                f"{path}: unreadable DICOM file, truncated or corrupt ({first_line(exc)})"
+            ) from None
+
+        meta = getattr(ds, "file_meta", None)
+        sop_class = str(
+            ds.get("SOPClassUID", "") or (meta or {}).get("MediaStorageSOPClassUID", "")
+        )
+        modality = str(ds.get("Modality", "") or "")
+        sop_name = UID(sop_class).name if sop_class else "unknown SOP class"
+        if not sop_class and not modality:
+            raise LoadError(
+                f"{path}: the DICOM header has no SOP class and no modality "
+                f"(truncated file, or not an image)"
+            )
+        if sop_class:
+            accepted = sop_class in _PROJECTION_SOP_CLASSES
+        else:
+            accepted = modality in _PROJECTION_MODALITIES
+        if not accepted:
+            raise LoadError(
+                f"{path}: is a {sop_name} (modality {modality or '?'}), not an X-ray "
+                f"angiogram; this program reads XA (or RF/DX projection) images"
+            )
+        if "PixelData" not in ds and "FloatPixelData" not in ds:
+            raise LoadError(
+                f"{path}: the DICOM file has no pixel data (truncated file, or no image in it)"
+            )
+        ts = str(meta.get("TransferSyntaxUID", "")) if meta is not None else ""
+        try:
+            pixels = ds.pixel_array
+        except Exception as exc:
+            ts_name = UID(ts).name if ts else "unknown transfer syntax"
+            raise LoadError(
+                f"{path}: cannot decode the pixel data ({ts_name}): {first_line(exc)}"
+            ) from None
+
+    rows, cols = int(ds.get("Rows", 0) or 0), int(ds.get("Columns", 0) or 0)
+    n_frames = int(_as_float(ds.get("NumberOfFrames")) or 1)
+    samples = int(ds.get("SamplesPerPixel", 1) or 1)
+    arr = np.asarray(pixels)
+    if samples > 1:  # colour (pydicom returns RGB): luminance, (.., H, W, 3) -> (.., H, W)
+        arr = arr[..., :3].astype(np.float32) @ np.array([0.299, 0.587, 0.114], np.float32)
+    if arr.ndim == 2:
+        arr = arr[None]
+    if arr.ndim != 3 or arr.shape[1:] != (rows, cols) or arr.shape[0] != n_frames:
+        raise LoadError(
+            f"{path}: pixel data of shape {arr.shape} does not match "
+            f"{n_frames} frame(s) of {rows}x{cols}"
+        )
+    photometric = str(ds.get("PhotometricInterpretation", "MONOCHROME2") or "MONOCHROME2")
+    bits_stored = int(ds.get("BitsStored", 8 * arr.dtype.itemsize) or 8)
+    signed = int(ds.get("PixelRepresentation", 0) or 0) == 1
+    frames = arr.astype(np.float32, copy=False)
+    if photometric == "MONOCHROME1":
+        if signed:
+            lo, hi = -(2 ** (bits_stored - 1)), 2 ** (bits_stored - 1) - 1
+        else:
+            lo, hi = 0, 2**bits_stored - 1
+        frames = (lo + hi) - frames  # same value range, vessels now dark
+
+    rep_number = ds.get("RepresentativeFrameNumber")
+    r_wave_pointer = _as_ints(ds.get("RWavePointer"))
+    frame_time = _as_float(ds.get("FrameTime"))
+    if frame_time is None and "FrameTimeVector" in ds:
+        ftv = _as_floats(ds.get("FrameTimeVector"))
+        if ftv and len(ftv) > 1:
+            frame_time = float(np.mean(ftv[1:]))
+    info: dict[str, Any] = {
+        "format": "dicom",
+        "sop_class": sop_class,
+        "sop_class_name": sop_name,
+        "modality": modality,
+        "rows": rows,
+        "cols": cols,
+        "n_frames": n_frames,
+        "frame_time_ms": frame_time,
+        "bits_allocated": int(ds.get("BitsAllocated", 0) or 0),
+        "bits_stored": bits_stored,
+        "pixel_representation": int(signed),
+        "photometric": photometric,
+        "inverted_on_load": photometric == "MONOCHROME1",
+        "transfer_syntax": ts,
+        "transfer_syntax_name": UID(ts).name if ts else "",
+        "representative_frame_number": int(rep_number) if rep_number is not None else None,
+        "r_wave_pointer": r_wave_pointer,
+        "r_wave_frames": [k - 1 for k in r_wave_pointer if 1 <= k <= n_frames],
+        "manufacturer": str(ds.get("Manufacturer", "") or ""),
+        "series_description": str(ds.get("SeriesDescription", "") or ""),
+    }
+    header = {
+        "alpha_deg": _as_float(_dicom_value(ds, "PositionerPrimaryAngle")),
+        "beta_deg": _as_float(_dicom_value(ds, "PositionerSecondaryAngle")),
+        "sid_mm": _as_float(_dicom_value(ds, "DistanceSourceToDetector")),
+        "sod_mm": _as_float(_dicom_value(ds, "DistanceSourceToPatient")),
+        "pixel_spacing_mm": _as_floats(_dicom_value(ds, "ImagerPixelSpacing")),
+        "patient_pixel_spacing_mm": _as_floats(_dicom_value(ds, "PixelSpacing")),
+        "fov_mm": _as_floats(_dicom_value(ds, "FieldOfViewDimensions")),
+        "magnification": _as_float(_dicom_value(ds, "EstimatedRadiographicMagnificationFactor")),
+        "kind": "dicom",
+    }
+    patient = {
+        "name": str(ds.get("PatientName", "") or ""),
+        "id": str(ds.get("PatientID", "") or ""),
+    }
+    return RawFile(frames=frames, header=header, info=info, patient=patient)

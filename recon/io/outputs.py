@@ -1,0 +1,128 @@
+"""The output files of a reconstruction: centerline CSV, report JSON, meshes.
+
+``outputs_as_bytes`` renders every file in memory (the viewer's downloads);
+``write_outputs`` writes them into a folder, each file whole or not at all.
+Mesh formats are the ones of :data:`MESH_FORMATS`, the one list of the
+project (the command line's ``--format`` and the viewer's menu use it).
+"""
+
+from __future__ import annotations
+
+import io
+import json
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+import trimesh
+
+from recon.io.files import atomic_write_bytes
+
+if TYPE_CHECKING:
+    from recon.pipeline import Reconstruction
+
+__all__ = [
+    "MESH_FORMATS",
+    "CENTERLINE_COLUMNS",
+    "export_mesh",
+    "centerline_csv",
+    "outputs_as_bytes",
+    "write_outputs",
+]
+
+MESH_FORMATS: tuple[str, ...] = ("stl", "obj", "ply", "glb")
+
+CENTERLINE_COLUMNS = (
+    "s_mm",
+    "x_mm",
+    "y_mm",
+    "z_mm",
+    "radius_mm",
+    "diameter_mm",
+    "area_mm2",
+    "radius_a_mm",
+    "radius_b_mm",
+)
+
+
+def export_mesh(mesh: trimesh.Trimesh, fmt: str) -> bytes:
+    """Serialise a mesh to bytes: "stl" (binary), "obj", "ply" (binary) or "glb".
+
+    Raises ValueError naming the supported formats for any other ``fmt``.
+    """
+    key = str(fmt).lower().lstrip(".")
+    if key not in MESH_FORMATS:
+        raise ValueError(
+            f"unknown mesh format {fmt!r}; supported formats: {', '.join(MESH_FORMATS)}"
+        )
+    if key == "ply":
+        data = mesh.export(file_type="ply", encoding="binary")
+    elif key == "obj":
+        data = mesh.export(file_type="obj", include_normals=True)
+    else:
+        data = mesh.export(file_type=key)
+    if isinstance(data, str):
+        data = data.encode("utf-8")
+    return bytes(data)
+
+
+def centerline_csv(rec: Reconstruction) -> bytes:
+    """centerline.csv: header line then one row per point, proximal to distal."""
+    cl = rec.centerline_3d
+    area = rec.surface.sections.area_mm2
+    table = np.column_stack(
+        [
+            cl.s_mm,
+            cl.X_world,
+            np.sqrt(area / np.pi),
+            rec.profile.diameter_mm,
+            area,
+            cl.radius_a_mm,
+            cl.radius_b_mm,
+        ]
+    )
+    buf = io.StringIO()
+    buf.write(",".join(CENTERLINE_COLUMNS) + "\n")
+    np.savetxt(buf, table, delimiter=",", fmt="%.4f")
+    return buf.getvalue().encode()
+
+
+def outputs_as_bytes(rec: Reconstruction, formats: tuple[str, ...] = ("stl",)) -> dict[str, bytes]:
+    """Every output file as bytes, keyed by file name (the viewer's downloads)."""
+    files = {"centerline.csv": centerline_csv(rec)}
+    for fmt in formats:
+        files[f"mesh.{fmt}"] = export_mesh(rec.surface.mesh, fmt)
+    report = json.dumps(rec.report(), indent=2, default=_json_default)
+    files["report.json"] = (report + "\n").encode()
+    files["seeds.json"] = (json.dumps(rec.seeds.to_dict(), indent=2) + "\n").encode()
+    return files
+
+
+def write_outputs(
+    rec: Reconstruction, out_dir: Path, formats: tuple[str, ...] = ("stl",)
+) -> list[Path]:
+    """Write the outputs into ``out_dir``; each file appears whole or not at all.
+
+    Every file is rendered to bytes first, so a failure leaves no file behind.
+    Raises :class:`~recon.errors.OutputError` naming the file that cannot be
+    written.
+    """
+    files = outputs_as_bytes(rec, formats)
+    files.pop("seeds.json")
+    out_dir = Path(out_dir)
+    written = []
+    for name, data in files.items():
+        path = out_dir / name
+        atomic_write_bytes(path, data)
+        written.append(path)
+    return written
+
+
+def _json_default(value: object) -> object:
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, tuple):
+        return list(value)
+    return str(value)

@@ -1,0 +1,157 @@
+"""User-supplied geometry values (command line or JSON) that replace a header's.
+
+A geometry JSON holds any of ``alpha_deg``, ``beta_deg``, ``sid_mm``,
+``sod_mm`` and ``pixel_spacing_mm`` ([row, col] or one number). It is the
+header of a PNG/TIFF angiogram, and overrides for a DICOM file. Keys of
+``ViewGeometry.to_dict()`` (rows, cols, ...) are tolerated; other keys are
+rejected as likely typos.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from recon.errors import LoadError
+from recon.io.files import read_json
+
+__all__ = [
+    "GEOMETRY_FIELDS",
+    "GEOMETRY_KEYS",
+    "GeometryOverrides",
+    "read_geometry_json",
+    "overrides_from_dict",
+    "spacing_pair",
+]
+
+# The five geometry values: key, DICOM keyword, tag, command-line flag.
+GEOMETRY_FIELDS = (
+    ("alpha_deg", "PositionerPrimaryAngle", "(0018,1510)", "--alpha-deg"),
+    ("beta_deg", "PositionerSecondaryAngle", "(0018,1511)", "--beta-deg"),
+    ("sid_mm", "DistanceSourceToDetector", "(0018,1110)", "--sid-mm"),
+    ("sod_mm", "DistanceSourceToPatient", "(0018,1111)", "--sod-mm"),
+    ("pixel_spacing_mm", "ImagerPixelSpacing", "(0018,1164)", "--pixel-spacing-mm"),
+)
+GEOMETRY_KEYS = tuple(f[0] for f in GEOMETRY_FIELDS)
+# Keys of ViewGeometry.to_dict() that a geometry JSON may carry and that are
+# checked (rows, cols) or ignored (the rest) rather than rejected as typos.
+_TOLERATED_JSON_KEYS = ("rows", "cols", "principal_offset_px", "rotvec_corr", "t_corr_mm")
+
+
+@dataclass(frozen=True)
+class GeometryOverrides:
+    """User-supplied geometry values; each one, when not None, replaces the header's.
+
+    Attributes
+    ----------
+    alpha_deg, beta_deg : positioner angles in degrees (LAO +, CRA +).
+    sid_mm, sod_mm : source-to-detector and source-to-isocenter distances in mm.
+    pixel_spacing_mm : detector pixel size (row, col) in mm.
+    source : where the values came from, for the notes ("override" or the
+        JSON file name).
+    """
+
+    alpha_deg: float | None = None
+    beta_deg: float | None = None
+    sid_mm: float | None = None
+    sod_mm: float | None = None
+    pixel_spacing_mm: tuple[float, float] | None = None
+    source: str = "override"
+
+    def __post_init__(self) -> None:
+        for key in ("alpha_deg", "beta_deg", "sid_mm", "sod_mm"):
+            value = getattr(self, key)
+            if value is not None:
+                value = float(value)
+                if not math.isfinite(value):
+                    raise LoadError(f"{self.source}: {key} must be a finite number, got {value}")
+                if key in ("sid_mm", "sod_mm") and value <= 0:
+                    raise LoadError(f"{self.source}: {key} must be positive, got {value}")
+                object.__setattr__(self, key, value)
+        if self.pixel_spacing_mm is not None:
+            spacing = spacing_pair(self.pixel_spacing_mm)
+            if spacing is None:
+                raise LoadError(
+                    f"{self.source}: pixel_spacing_mm must be one positive number or "
+                    f"[row, col], got {self.pixel_spacing_mm!r}"
+                )
+            object.__setattr__(self, "pixel_spacing_mm", spacing)
+
+    def values(self) -> dict[str, Any]:
+        """The supplied (not None) values by key."""
+        return {k: getattr(self, k) for k in GEOMETRY_KEYS if getattr(self, k) is not None}
+
+    def merged_over(self, other: GeometryOverrides | None) -> GeometryOverrides:
+        """These overrides with ``other`` filling the values they leave None."""
+        if other is None:
+            return self
+        kwargs: dict[str, Any] = {}
+        for key in GEOMETRY_KEYS:
+            mine = getattr(self, key)
+            kwargs[key] = mine if mine is not None else getattr(other, key)
+        mine_set, other_set = self.values(), other.values()
+        if mine_set and other_set:
+            source = f"{self.source} / {other.source}"
+        else:
+            source = self.source if mine_set else other.source
+        return GeometryOverrides(**kwargs, source=source)
+
+    @classmethod
+    def from_json(cls, path: str | os.PathLike) -> GeometryOverrides:
+        """Read ``{"alpha_deg", "beta_deg", "sid_mm", "sod_mm", "pixel_spacing_mm"}``.
+
+        Any subset of the keys may be given; ``pixel_spacing_mm`` is [row, col]
+        or one number. Keys of ``ViewGeometry.to_dict()`` (rows, cols, ...) are
+        tolerated; other keys are rejected as likely typos.
+        """
+        data = read_geometry_json(path)
+        return overrides_from_dict(data, str(path))
+
+
+def read_geometry_json(path: str | os.PathLike) -> dict:
+    """The object of a geometry JSON file; LoadError naming the file otherwise."""
+    data = read_json(path, LoadError, "geometry JSON")
+    if not isinstance(data, dict):
+        raise LoadError(
+            f"{Path(path)}: the geometry JSON must be an object with keys {GEOMETRY_KEYS}"
+        )
+    return data
+
+
+def overrides_from_dict(data: dict, source: str) -> GeometryOverrides:
+    """Overrides from a parsed geometry JSON; errors name ``source``."""
+    unknown = sorted(set(data) - set(GEOMETRY_KEYS) - set(_TOLERATED_JSON_KEYS))
+    if unknown:
+        raise LoadError(
+            f"{source}: unknown key {unknown[0]!r} (expected {', '.join(GEOMETRY_KEYS)})"
+        )
+    kwargs: dict[str, Any] = {}
+    for key in GEOMETRY_KEYS:
+        value = data.get(key)
+        if value is None:
+            continue
+        if key == "pixel_spacing_mm":
+            kwargs[key] = value
+            continue
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise LoadError(f"{source}: {key} must be a number, got {value!r}")
+        kwargs[key] = float(value)
+    return GeometryOverrides(**kwargs, source=Path(source).name)
+
+
+def spacing_pair(value: object) -> tuple[float, float] | None:
+    """(row, col) spacing from one number or a pair; None when invalid."""
+    try:
+        arr = np.asarray(value, dtype=float).reshape(-1)
+    except (TypeError, ValueError):
+        return None
+    if arr.size == 1:
+        arr = np.repeat(arr, 2)
+    if arr.size != 2 or not np.all(np.isfinite(arr)) or not np.all(arr > 0):
+        return None
+    return (float(arr[0]), float(arr[1]))

@@ -1,0 +1,37 @@
+"""Every bench module's run takes the same arguments: run(cases=None, seed=0)."""
+
+from __future__ import annotations
+
+import importlib
+import inspect
+
+import numpy as np
+import pytest
+
+from recon.bench.common import pose_error
+from recon.synth import make_phantom
+
+BENCHES = ("centerline", "calibration", "matching", "reconstruct")
+
+
+@pytest.mark.parametrize("name", BENCHES)
+def test_run_signature_is_cases_and_seed(name: str) -> None:
+    module = importlib.import_module(f"recon.bench.{name}")
+    params = inspect.signature(module.run).parameters
+    assert list(params) == ["cases", "seed"]
+    assert params["cases"].default is None and params["seed"].default == 0
+    assert all(p.kind is inspect.Parameter.POSITIONAL_OR_KEYWORD for p in params.values())
+
+
+def test_pose_error_of_the_header_and_of_the_truth() -> None:
+    case = make_phantom("data1", 2, render=False)
+    X = case.truth.segment_X_world
+    assert pose_error(case.view_b_true, case.view_b_true, X) == pytest.approx((0.0, 0.0), abs=1e-9)
+    rot_deg, disp_mm = pose_error(case.view_b_nominal, case.view_b_true, X)
+    angle = np.degrees(np.linalg.norm(case.truth.correction_rotvec))
+    assert rot_deg == pytest.approx(angle, rel=1e-9)
+    # The header's rig error moves a point X fixed to the true rig to R^T (X - t).
+    R, t = case.view_b_true.R_corr, np.asarray(case.view_b_true.t_corr_mm)
+    moved = (X - t) @ R
+    assert disp_mm == pytest.approx(np.mean(np.linalg.norm(moved - X, axis=1)), rel=1e-9)
+    assert disp_mm > 1.0

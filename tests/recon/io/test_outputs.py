@@ -1,0 +1,131 @@
+"""recon.io.outputs: mesh export, and the output files written whole or not at all."""
+
+import io
+import json
+
+import numpy as np
+import pytest
+import trimesh
+
+from recon.errors import OutputError
+from recon.geometry import ViewGeometry
+from recon.io.angiogram import load_angiogram
+from recon.io.demo import demo_paths
+from recon.io.outputs import (
+    CENTERLINE_COLUMNS,
+    MESH_FORMATS,
+    centerline_csv,
+    export_mesh,
+    outputs_as_bytes,
+    write_outputs,
+)
+from recon.io.seeds_file import load_seeds
+from recon.pipeline import reconstruct_pair
+from recon.surface import build_surface
+from recon.types import Centerline3D
+
+VIEW_A = ViewGeometry(-30.0, 0.0, 1000.0, 750.0, (0.39, 0.39), 512, 512)
+VIEW_B = ViewGeometry(30.0, 0.0, 1000.0, 750.0, (0.39, 0.39), 512, 512)
+
+
+def centerline(X, r_a, r_b=None):
+    X = np.asarray(X, dtype=float)
+    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(X, axis=0), axis=1))])
+    t = np.gradient(X, s, axis=0)
+    t /= np.linalg.norm(t, axis=1, keepdims=True)
+    r_a = np.broadcast_to(np.asarray(r_a, dtype=float), (len(X),)).copy()
+    r_b = r_a.copy() if r_b is None else np.broadcast_to(r_b, (len(X),)).astype(float)
+    return Centerline3D(
+        X_world=X,
+        s_mm=s,
+        tangents=t,
+        radius_a_mm=r_a,
+        radius_b_mm=r_b,
+        X_raw_world=X,
+        points_a_px=np.zeros((len(X), 2)),
+        points_b_px=np.zeros((len(X), 2)),
+    )
+
+
+def straight(length=40.0, direction=(0.6, 0.0, 0.8), origin=(0.0, 3.0, 0.0), step=0.25):
+    t = np.arange(0.0, length + 1e-9, step) - length / 2
+    return np.asarray(origin) + t[:, None] * np.asarray(direction) / np.linalg.norm(direction)
+
+
+# ---------------------------------------------------------------- export
+@pytest.fixture(scope="module")
+def tube_mesh():
+    return build_surface(centerline(straight(length=20.0), 1.5), VIEW_A, VIEW_B).mesh
+
+
+@pytest.mark.parametrize("fmt", MESH_FORMATS)
+def test_export_round_trip(tube_mesh, fmt):
+    data = export_mesh(tube_mesh, fmt)
+    assert isinstance(data, bytes) and len(data) > 0
+    loaded = trimesh.load(io.BytesIO(data), file_type=fmt, force="mesh")
+    loaded.merge_vertices()
+    assert loaded.is_watertight
+    assert len(loaded.faces) == len(tube_mesh.faces)
+    assert loaded.volume == pytest.approx(tube_mesh.volume, rel=1e-5)
+    if fmt == "stl":
+        assert data[:80] != b"solid" and len(data) == 84 + 50 * len(tube_mesh.faces)
+        assert len(loaded.vertices) == len(tube_mesh.vertices)
+
+
+def test_export_unknown_format_lists_the_formats(tube_mesh):
+    with pytest.raises(ValueError, match="stl, obj, ply, glb"):
+        export_mesh(tube_mesh, "vtk")
+
+
+# ---------------------------------------------------------------- files
+@pytest.fixture(scope="module")
+def demo_rec():
+    paths = demo_paths()
+    return reconstruct_pair(
+        load_angiogram(paths["a"]), load_angiogram(paths["b"]), load_seeds(paths["seeds"])
+    )
+
+
+def test_outputs_as_bytes_and_the_centerline_table(demo_rec):
+    files = outputs_as_bytes(demo_rec, ("stl", "glb"))
+    assert set(files) == {"centerline.csv", "mesh.stl", "mesh.glb", "report.json", "seeds.json"}
+    assert files["centerline.csv"] == centerline_csv(demo_rec)
+    lines = files["centerline.csv"].decode().splitlines()
+    assert lines[0] == ",".join(CENTERLINE_COLUMNS)
+    table = np.loadtxt(lines[1:], delimiter=",")
+    assert table.shape == (len(demo_rec.centerline_3d.s_mm), len(CENTERLINE_COLUMNS))
+    assert json.loads(files["report.json"])["mesh"]["watertight"] is True
+    assert files["mesh.stl"] == export_mesh(demo_rec.surface.mesh, "stl")
+
+
+def test_write_outputs_writes_every_file_but_the_seeds(demo_rec, tmp_path):
+    out = tmp_path / "new" / "folder"
+    paths = write_outputs(demo_rec, out, formats=("stl", "obj"))
+    names = ["centerline.csv", "mesh.obj", "mesh.stl", "report.json"]
+    assert sorted(p.name for p in paths) == names
+    files = outputs_as_bytes(demo_rec, ("stl", "obj"))
+    for path in paths:
+        assert path.parent == out and path.read_bytes() == files[path.name]
+    assert not list(out.glob(".*tmp"))
+
+
+def test_out_path_that_is_a_file_is_an_output_error(demo_rec, tmp_path):
+    out = tmp_path / "out"
+    out.write_text("a file, not a folder")
+    with pytest.raises(OutputError) as err:
+        write_outputs(demo_rec, out)
+    message = str(err.value)
+    assert message.startswith(f"{out / 'centerline.csv'}: cannot write")
+    assert str(out) in message and "\n" not in message
+    assert out.read_text() == "a file, not a folder"
+
+
+def test_a_file_that_cannot_be_written_leaves_no_part_behind(demo_rec, tmp_path):
+    (tmp_path / "mesh.stl").mkdir()  # a folder where the mesh should go
+    with pytest.raises(OutputError, match=r"mesh\.stl: cannot write"):
+        write_outputs(demo_rec, tmp_path)
+    # the files before it are whole, the mesh is not there, no temporary file is left
+    assert (tmp_path / "centerline.csv").read_bytes() == centerline_csv(demo_rec)
+    assert (tmp_path / "mesh.stl").is_dir() and not list((tmp_path / "mesh.stl").iterdir())
+    assert not (tmp_path / "report.json").exists()
+    assert not list(tmp_path.glob(".*tmp"))

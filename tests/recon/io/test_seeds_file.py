@@ -1,0 +1,86 @@
+"""recon.io.seeds_file: reading and writing seeds.json."""
+
+import json
+
+import numpy as np
+import pytest
+
+from recon.errors import OutputError
+from recon.io.seeds_file import load_seeds, save_seeds
+from recon.seeds import SeedsError
+
+EXAMPLE = {
+    "version": 1,
+    "segments": [
+        {
+            "name": "LAD mid",
+            "a": [[170.5, 54.1], [179.9, 139.1], [323.0, 261.2]],
+            "b": [[368.6, 101.1], [371.2, 177.0], [401.9, 331.4]],
+        }
+    ],
+    "features": [{"name": "D1 bifurcation", "a": [192.1, 160.3], "b": [379.0, 196.7]}],
+}
+
+
+def write(tmp_path, data, name="seeds.json"):
+    path = tmp_path / name
+    path.write_text(data if isinstance(data, str) else json.dumps(data))
+    return path
+
+
+def test_reads_the_documented_example(tmp_path):
+    seeds = load_seeds(write(tmp_path, EXAMPLE))
+    assert seeds.segments[0].name == "LAD mid"
+    assert seeds.segments[0].a.shape == (3, 2)
+    pa, pb, names = seeds.correspondences()
+    # Segment ends then features; waypoints do not correspond.
+    assert np.allclose(pa, [[170.5, 54.1], [323.0, 261.2], [192.1, 160.3]])
+    assert np.allclose(pb, [[368.6, 101.1], [401.9, 331.4], [379.0, 196.7]])
+    assert names == ["LAD mid proximal", "LAD mid distal", "D1 bifurcation"]
+
+
+def test_version_is_optional_and_round_trip(tmp_path):
+    data = dict(EXAMPLE)
+    data.pop("version")
+    seeds = load_seeds(write(tmp_path, data))
+    out = tmp_path / "sub" / "again.json"
+    save_seeds(seeds, out)
+    assert load_seeds(out) == seeds
+    assert json.loads(out.read_text())["version"] == 1
+    assert not list(out.parent.glob("*.tmp"))
+
+
+@pytest.mark.parametrize(
+    ("data", "message"),
+    [
+        ("{not json", "not valid JSON"),
+        ([1, 2], "top level"),
+        ({"version": 2}, "unsupported version"),
+        ({"segments": [{"a": [[1, 2]], "b": [[1, 2], [3, 4]]}]}, "at least two points"),
+        ({"segments": [{"a": [[1, "x"], [3, 4]], "b": [[1, 2], [3, 4]]}]}, "segments[0].a[0]"),
+        ({"features": [{"a": [1, 2]}]}, "features[0]"),
+        ({"features": [{"a": [1, 2], "b": [float("nan"), 1]}]}, "features[0].b"),
+    ],
+)
+def test_bad_files_name_the_file_and_the_entry(tmp_path, data, message):
+    path = write(tmp_path, data if isinstance(data, str) else json.dumps(data))
+    with pytest.raises(SeedsError) as info:
+        load_seeds(path)
+    assert str(path) in str(info.value)
+    assert message in str(info.value)
+    assert "\n" not in str(info.value)
+
+
+def test_missing_file(tmp_path):
+    with pytest.raises(SeedsError, match="cannot read"):
+        load_seeds(tmp_path / "nope.json")
+
+
+def test_unwritable_path_is_an_output_error(tmp_path):
+    seeds = load_seeds(write(tmp_path, EXAMPLE))
+    blocker = tmp_path / "file"
+    blocker.write_text("")
+    with pytest.raises(OutputError) as info:
+        save_seeds(seeds, blocker / "seeds.json")
+    assert str(blocker / "seeds.json") in str(info.value)
+    assert "\n" not in str(info.value)

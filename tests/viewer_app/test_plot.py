@@ -1,0 +1,48 @@
+"""The diameter chart (viewer_app.plot) from a small stand-in of a reconstruction."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+
+from viewer_app.plot import profile_plot
+
+CURVE = (30, 90, 200)  # the (smoothed) diameter
+LESION_BAND = (255, 225, 225)
+
+
+def _rec(smooth: bool) -> SimpleNamespace:
+    s = np.linspace(0.0, 50.0, 201)
+    d = 3.0 - 1.5 * np.exp(-(((s - 25.0) / 4.0) ** 2))
+    profile = SimpleNamespace(s_mm=s, diameter_mm=d, reference_diameter_mm=np.full_like(s, 3.0))
+    if smooth:
+        profile.diameter_smooth_mm = d
+    meas = {"mld_mm": 1.5, "mld_s_mm": 25.0, "lesion_start_s_mm": 18.0, "lesion_end_s_mm": 32.0}
+    return SimpleNamespace(profile=profile, measurements=SimpleNamespace(to_dict=lambda: meas))
+
+
+def _curve_rows(img: np.ndarray, col: int) -> np.ndarray:
+    return np.flatnonzero(np.all(img[:, col] == CURVE, axis=-1))
+
+
+def test_chart_is_an_rgb_image_with_the_diameter_curve() -> None:
+    img = profile_plot(_rec(smooth=False))
+    assert img.shape == (360, 640, 3) and img.dtype == np.uint8
+    assert np.all(img[0, 0] == 255)  # white background
+    assert np.count_nonzero(np.all(img == CURVE, axis=-1)) > 500
+    assert np.any(np.all(img == LESION_BAND, axis=-1))
+    # Same mapping as the chart: left 56, right 14, top 26, bottom 40 px; y to 1.15 x max.
+    left, right, top, bottom, ymax = 56, 14, 26, 40, 3.0 * 1.15
+    for s_mm in (5.0, 20.0, 40.0):  # (not at the MLD: its dot covers the curve)
+        d_mm = 3.0 - 1.5 * np.exp(-(((s_mm - 25.0) / 4.0) ** 2))
+        col = round(left + s_mm / 50.0 * (640 - left - right))
+        row = 360 - bottom - d_mm / ymax * (360 - top - bottom)
+        rows = _curve_rows(img, col)
+        assert rows.size and abs(np.median(rows) - row) <= 2.0, (s_mm, rows, row)
+
+
+def test_chart_size_and_smoothed_curve() -> None:
+    img = profile_plot(_rec(smooth=True), width=400, height=240)
+    assert img.shape == (240, 400, 3) and img.dtype == np.uint8
+    assert np.count_nonzero(np.all(img == CURVE, axis=-1)) > 300

@@ -1,0 +1,119 @@
+"""The panels' texts (viewer_app.results) from small stand-ins of the results."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+
+from viewer_app.results import (
+    NO_RECONSTRUCTION_TEXT,
+    NOT_CALIBRATED_TEXT,
+    angle_text,
+    calibration_markdown,
+    fmt,
+    info_markdown,
+    marks_markdown,
+    results_markdown,
+)
+
+
+def test_angles_read_as_a_clinician_says_them() -> None:
+    assert angle_text(-29.3, 25.5) == "RAO 29.3° / CRA 25.5°"
+    assert angle_text(30.7, -3.0) == "LAO 30.7° / CAU 3.0°"
+    assert angle_text(0.0, 0.0) == "LAO 0.0° / CRA 0.0°"
+
+
+def test_table_cells() -> None:
+    assert fmt(1.23456) == "1.23"
+    assert fmt(np.float32(0.5)) == "0.5"
+    assert fmt(123456.7) == "123457"
+    assert fmt([1.0, 2.5]) == "1, 2.5"
+    assert fmt((3, "x")) == "3, x"
+    assert fmt(7) == "7" and fmt(None) == "None"
+
+
+def _angio(alpha: float, beta: float, frame: int, n_frames: int) -> SimpleNamespace:
+    geometry = SimpleNamespace(alpha_deg=alpha, beta_deg=beta, sid_mm=976.0, sod_mm=720.4,
+                               rows=512, cols=480)
+    return SimpleNamespace(geometry=geometry, frame_index=frame, n_frames=n_frames)
+
+
+def test_info_table() -> None:
+    text = info_markdown(_angio(-29.3, 25.5, 0, 1), _angio(30.7, 23.6, 3, 9), "a.dcm", "b.dcm")
+    assert text == "\n".join([
+        "| | A | B |",
+        "| --- | --- | --- |",
+        "| file | a.dcm | b.dcm |",
+        "| angles | RAO 29.3° / CRA 25.5° | LAO 30.7° / CRA 23.6° |",
+        "| SID / SOD (mm) | 976 / 720 | 976 / 720 |",
+        "| size | 480×512 | 480×512 |",
+        "| frame | 1/1 | 4/9 |",
+    ])
+
+
+def test_marks_summary() -> None:
+    seeds = SimpleNamespace(segments=[object()], features=[object(), object()])
+    state = SimpleNamespace(
+        marks=[object()] * 5, to_seeds=lambda: seeds, last_message="too far",
+        missing=lambda: [f"missing {i}" for i in range(8)],
+    )
+    text = marks_markdown(state, 1.234, "/tmp/auto.json")
+    lines = text.splitlines()
+    assert lines[0] == "**5 marks**: 1 complete segment(s), 2 feature pair(s)."
+    assert lines[1:7] == [f"- missing {i}" for i in range(6)]  # at most six
+    assert lines[7] == "- ⚠ too far"
+    assert "Last click → epipolar line: 1.2 ms (server)." in text
+    assert text.endswith("\nAutosave: `/tmp/auto.json`")
+    state.last_message = None
+    quiet = marks_markdown(state, float("nan"), "/tmp/auto.json")
+    assert "⚠" not in quiet and "Last click" not in quiet
+
+
+def test_calibration_table() -> None:
+    res = SimpleNamespace(
+        rotvec=np.radians([0.0, 0.0, 1.5]), t_mm=np.array([3.0, 4.0, 0.0]),
+        error_before_px=2.744, error_after_px=0.261, error_before_mm=1.07, error_after_mm=0.1,
+        iterations=5, elapsed_ms=7.4, warnings=("underdetermined",),
+    )
+    assert calibration_markdown(res) == "\n".join([
+        "| | before | after |",
+        "| --- | --- | --- |",
+        "| error (px) | 2.74 | 0.26 |",
+        "| error (mm) | 1.07 | 0.10 |",
+        "",
+        "Pose correction of B: **1.50°** rotation, **5.00 mm** translation "
+        "(3.00, 4.00, 0.00 mm); 5 iterations, 7 ms.",
+        "- ⚠ underdetermined",
+    ])
+    assert "Not calibrated" in NOT_CALIBRATED_TEXT and NO_RECONSTRUCTION_TEXT
+
+
+def test_results_tables() -> None:
+    stretches = {"a": [(1.0, 2.5)], "b": []}
+    rec = SimpleNamespace(
+        measurements=SimpleNamespace(to_dict=lambda: {"mld_mm": 1.234, "lesion": None}),
+        centerline_3d=SimpleNamespace(overlap_stretches_mm=lambda view: stretches[view]),
+        metrics={"a": {"x": 0.5, "y": 2.0}, "b": {"x": 0.25, "z": 1.0}, "rmse_mm": 0.123},
+        timings_ms={"trace": 12.345, "total": 20000.0},
+    )
+    assert results_markdown(rec) == "\n".join([
+        "| measurement | value |",
+        "| --- | --- |",
+        "| mld_mm | 1.23 |",
+        "| lesion | None |",
+        "| view A overlapped: radius from view B | 1.0-2.5 mm |",
+        "",
+        "| Table 3 | view A | view B |",
+        "| --- | --- | --- |",
+        "| x | 0.5 | 0.25 |",
+        "",
+        "| Table 3 (both views) | value |",
+        "| --- | --- |",
+        "| rmse_mm | 0.123 |",
+        "",
+        "| stage | ms |",
+        "| --- | --- |",
+        "| trace | 12.3 |",
+        "| total | 20000 |",
+    ])

@@ -1,0 +1,443 @@
+"""The GUI panels of the viewer: typed widget handles, built and wired in one place.
+
+Each panel is a small dataclass whose fields are the viser handles of one
+folder of the control panel; the function that builds it also wires each
+widget's callback where the widget is made. Callbacks only call
+:class:`viewer_app.app.ViewerApp`'s public command methods; the app, in
+turn, shows its state through the ``Panels.show_*`` methods.
+
+Widgets that mirror the state (frame, window, segment, selected mark) are
+set from Python inside :meth:`Refreshing.during`, and their callbacks then
+do nothing.
+"""
+
+from __future__ import annotations
+
+import contextlib
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+import viser
+
+from recon.io import MESH_FORMATS
+from viewer_app.plot import profile_plot
+from viewer_app.results import (
+    NO_RECONSTRUCTION_TEXT,
+    NOT_CALIBRATED_TEXT,
+    calibration_markdown,
+    info_markdown,
+    marks_markdown,
+    results_markdown,
+)
+from viewer_app.state import MODE_LABELS, MODES
+
+if TYPE_CHECKING:
+    from recon.calibration import CalibrationResult
+    from recon.pipeline import Reconstruction
+    from viewer_app.app import ViewerApp
+    from viewer_app.scene import View
+    from viewer_app.state import MarkState
+
+__all__ = [
+    "CalibratePanel",
+    "CasePanel",
+    "ExportPanel",
+    "MarksPanel",
+    "Panels",
+    "Refreshing",
+    "ResultsPanel",
+    "SeedsPanel",
+    "ViewControls",
+    "build_panels",
+]
+
+VIEW_KEYS = ("a", "b")
+
+
+class Refreshing:
+    """Whether Python is setting widgets to mirror the state (their callbacks must not act)."""
+
+    def __init__(self) -> None:
+        self.active = False
+
+    @contextlib.contextmanager
+    def during(self) -> Iterator[None]:
+        self.active = True
+        try:
+            yield
+        finally:
+            self.active = False
+
+
+@dataclass(frozen=True)
+class ViewControls:
+    """One view's widgets, spread over three folders (Case, Open other files, Window / level)."""
+
+    frame: viser.GuiSliderHandle  # 0-based frame of a cine run; hidden for one frame
+    path: viser.GuiTextHandle
+    upload: viser.GuiUploadButtonHandle
+    level: viser.GuiSliderHandle
+    width: viser.GuiSliderHandle
+
+
+@dataclass(frozen=True)
+class CasePanel:
+    """The loaded pair: the case table, opening other files and the per-view controls."""
+
+    info: viser.GuiMarkdownHandle
+    open_files: viser.GuiButtonHandle
+    views: dict[str, ViewControls]  # "a", "b"
+
+
+@dataclass(frozen=True)
+class MarksPanel:
+    """Click mode, segments, the selected mark, undo / clear and the marks summary."""
+
+    mode: viser.GuiDropdownHandle
+    segment: viser.GuiDropdownHandle
+    new_segment: viser.GuiButtonHandle
+    select: viser.GuiDropdownHandle
+    undo: viser.GuiButtonHandle
+    clear: viser.GuiButtonHandle
+    summary: viser.GuiMarkdownHandle
+
+
+@dataclass(frozen=True)
+class SeedsPanel:
+    """Loading and saving the marks as a seeds.json."""
+
+    path: viser.GuiTextHandle
+    load: viser.GuiButtonHandle
+    save: viser.GuiButtonHandle
+    upload: viser.GuiUploadButtonHandle
+
+
+@dataclass(frozen=True)
+class CalibratePanel:
+    button: viser.GuiButtonHandle
+    markdown: viser.GuiMarkdownHandle
+
+
+@dataclass(frozen=True)
+class ResultsPanel:
+    """The Reconstruct folder: the button, its progress, the camera button, tables and chart."""
+
+    reconstruct: viser.GuiButtonHandle
+    progress: viser.GuiProgressBarHandle
+    view_all: viser.GuiButtonHandle
+    markdown: viser.GuiMarkdownHandle
+    plot: viser.GuiImageHandle
+
+
+@dataclass(frozen=True)
+class ExportPanel:
+    mesh_format: viser.GuiDropdownHandle
+    mesh: viser.GuiButtonHandle
+    centerline_csv: viser.GuiButtonHandle
+    report_json: viser.GuiButtonHandle
+    seeds_json: viser.GuiButtonHandle
+
+
+@dataclass(frozen=True)
+class Panels:
+    """Every panel of the control panel, top to bottom, and the ways the app fills them."""
+
+    case: CasePanel
+    marks: MarksPanel
+    seeds: SeedsPanel
+    calibrate: CalibratePanel
+    results: ResultsPanel
+    export: ExportPanel
+    refreshing: Refreshing
+
+    def show_pair(self, views: Mapping[str, View]) -> None:
+        """File paths, window sliders (range and value) and frame sliders of a new pair."""
+        with self.refreshing.during():
+            for key, v in views.items():
+                c = self.case.views[key]
+                c.path.value = v.angio.path
+                lo, hi = float(v.angio.image.min()), float(v.angio.image.max())
+                hi = hi if hi > lo else lo + 1.0
+                lvl, wid = c.level, c.width
+                lvl.min, lvl.max, lvl.step = lo, hi, (hi - lo) / 200
+                wid.min, wid.max, wid.step = (hi - lo) / 100, (hi - lo) * 2, (hi - lo) / 200
+                lvl.value, wid.value = v.level, v.width
+                fr = c.frame
+                if v.angio.n_frames > 1:
+                    fr.max = v.angio.n_frames - 1
+                    fr.value = v.angio.frame_index
+                    fr.visible = True
+                else:
+                    fr.visible = False
+            self.show_info(views)
+
+    def show_info(self, views: Mapping[str, View]) -> None:
+        a, b = views["a"], views["b"]
+        self.case.info.content = info_markdown(a.angio, b.angio, a.display_name, b.display_name)
+
+    def show_marks(self, st: MarkState, last_click_ms: float, autosave_path: str | Path) -> None:
+        """The segment and selection lists, and the marks summary."""
+        panel = self.marks
+        with self.refreshing.during():
+            panel.segment.options = tuple(st.segment_names)
+            panel.segment.value = st.segment_names[st.current_segment]
+            options = ["(none)"] + [f"{m.view.upper()} {st.label(m)} #{m.id}" for m in st.marks]
+            panel.select.options = tuple(options)
+            sel = st.selected
+            panel.select.value = (options[[m.id for m in st.marks].index(sel.id) + 1]
+                                  if sel is not None else "(none)")
+        panel.summary.content = marks_markdown(st, last_click_ms, autosave_path)
+
+    def show_calibration(self, res: CalibrationResult) -> None:
+        self.calibrate.markdown.content = calibration_markdown(res)
+
+    def show_progress(self, fraction: float) -> None:
+        self.results.progress.value = float(np.clip(fraction * 100.0, 0.0, 100.0))
+
+    def clear_results(self) -> None:
+        """No reconstruction, not calibrated, no chart."""
+        self.results.markdown.content = NO_RECONSTRUCTION_TEXT
+        self.calibrate.markdown.content = NOT_CALIBRATED_TEXT
+        self.results.plot.visible = False
+
+    def show_reconstruction(self, rec: Reconstruction) -> None:
+        """The results tables and the diameter chart."""
+        self.results.markdown.content = results_markdown(rec)
+        self.results.plot.image = profile_plot(rec)
+        self.results.plot.visible = True
+
+
+def build_panels(gui: viser.GuiApi, app: ViewerApp) -> Panels:
+    """Add every folder to the control panel, in order, with its callbacks."""
+    refreshing = Refreshing()
+    return Panels(
+        case=_case_panel(gui, app, refreshing),
+        marks=_marks_panel(gui, app, refreshing),
+        seeds=_seeds_panel(gui, app),
+        calibrate=_calibrate_panel(gui, app),
+        results=_results_panel(gui, app),
+        export=_export_panel(gui, app),
+        refreshing=refreshing,
+    )
+
+
+def _case_panel(gui: viser.GuiApi, app: ViewerApp, refreshing: Refreshing) -> CasePanel:
+    with gui.add_folder("Case"):
+        info = gui.add_markdown("")
+        frames = {key: _frame_slider(gui, app, refreshing, key) for key in VIEW_KEYS}
+    with gui.add_folder("Open other files", expand_by_default=False):
+        paths = {key: gui.add_text(f"File {key.upper()}", "") for key in VIEW_KEYS}
+        open_files = gui.add_button("Open files", icon=viser.Icon.FOLDER_OPEN)
+
+        @open_files.on_click
+        def _(event: viser.GuiEvent) -> None:
+            pa, pb = paths["a"].value.strip(), paths["b"].value.strip()
+            app.open_pair(pa, pb, client=event.client)
+
+        uploads = {key: _upload_button(gui, app, key) for key in VIEW_KEYS}
+    with gui.add_folder("Window / level", expand_by_default=False):
+        windows = {key: _window_sliders(gui, app, refreshing, key) for key in VIEW_KEYS}
+    views = {
+        key: ViewControls(frame=frames[key], path=paths[key], upload=uploads[key],
+                          level=windows[key][0], width=windows[key][1])
+        for key in VIEW_KEYS
+    }
+    return CasePanel(info=info, open_files=open_files, views=views)
+
+
+def _frame_slider(
+    gui: viser.GuiApi, app: ViewerApp, refreshing: Refreshing, key: str
+) -> viser.GuiSliderHandle:
+    slider = gui.add_slider(f"Frame {key.upper()}", 0, 1, 1, 0, visible=False)
+
+    @slider.on_update
+    def _(event: viser.GuiEvent) -> None:
+        if refreshing.active:
+            return
+        app.guard("Frame", event.client, lambda: app.set_frame(key, int(slider.value)))
+
+    return slider
+
+
+def _upload_button(gui: viser.GuiApi, app: ViewerApp, key: str) -> viser.GuiUploadButtonHandle:
+    upload = gui.add_upload_button(f"Upload {key.upper()}", icon=viser.Icon.UPLOAD)
+
+    @upload.on_upload
+    def _(event: viser.GuiEvent) -> None:
+        f = upload.value
+        app.open_upload(key, f.name, f.content, client=event.client)
+
+    return upload
+
+
+def _window_sliders(
+    gui: viser.GuiApi, app: ViewerApp, refreshing: Refreshing, key: str
+) -> tuple[viser.GuiSliderHandle, viser.GuiSliderHandle]:
+    level = gui.add_slider(f"Level {key.upper()}", 0.0, 1.0, 1.0, 0.5)
+    width = gui.add_slider(f"Width {key.upper()}", 1.0, 2.0, 1.0, 1.0)
+
+    def window_changed(event: viser.GuiEvent) -> None:
+        if refreshing.active:
+            return
+        app.set_window(key, level.value, width.value)
+
+    level.on_update(window_changed)
+    width.on_update(window_changed)
+    return level, width
+
+
+def _marks_panel(gui: viser.GuiApi, app: ViewerApp, refreshing: Refreshing) -> MarksPanel:
+    label_to_mode = {v: k for k, v in MODE_LABELS.items()}
+    # The mode, segment and selection widgets mirror the state. Setting them from
+    # Python fires these callbacks later on viser's event loop (client None), when
+    # the value read may already be stale: only a user's change may act.
+    with gui.add_folder("Marks"):
+        mode = gui.add_dropdown("Mode", [MODE_LABELS[m] for m in MODES],
+                                initial_value=MODE_LABELS["proximal"])
+
+        @mode.on_update
+        async def _(event: viser.GuiEvent) -> None:
+            if event.client is None:
+                return
+            app.set_mode(label_to_mode[mode.value])
+
+        segment = gui.add_dropdown("Segment", ["Segment 1"])
+
+        @segment.on_update
+        async def _(event: viser.GuiEvent) -> None:
+            if refreshing.active or event.client is None:
+                return
+            app.set_segment(segment.value)
+
+        new_segment = gui.add_button("New segment", icon=viser.Icon.PLUS)
+
+        @new_segment.on_click
+        async def _(event: viser.GuiEvent) -> None:
+            app.new_segment()
+
+        select = gui.add_dropdown("Selected mark", ["(none)"])
+
+        @select.on_update
+        async def _(event: viser.GuiEvent) -> None:
+            if refreshing.active or event.client is None:
+                return
+            value = select.value
+            app.select_listed(None if value == "(none)" else int(value.split("#")[-1]))
+
+        undo = gui.add_button("Undo", icon=viser.Icon.ARROW_BACK_UP)
+
+        @undo.on_click
+        async def _(event: viser.GuiEvent) -> None:
+            app.undo()
+
+        clear = gui.add_button("Clear marks", icon=viser.Icon.TRASH, color="red")
+
+        @clear.on_click
+        async def _(event: viser.GuiEvent) -> None:
+            app.clear()
+
+        summary = gui.add_markdown("")
+    return MarksPanel(mode=mode, segment=segment, new_segment=new_segment, select=select,
+                      undo=undo, clear=clear, summary=summary)
+
+
+def _seeds_panel(gui: viser.GuiApi, app: ViewerApp) -> SeedsPanel:
+    with gui.add_folder("Seeds file", expand_by_default=False):
+        path = gui.add_text("Seeds file", "")
+        load = gui.add_button("Load seeds from path")
+
+        @load.on_click
+        def _(event: viser.GuiEvent) -> None:
+            app.load_seeds(path.value.strip(), client=event.client)
+
+        save = gui.add_button("Save seeds to path")
+
+        @save.on_click
+        def _(event: viser.GuiEvent) -> None:
+            target = path.value.strip()
+
+            def run() -> None:
+                if not target:
+                    raise ValueError("save seeds: type a file path first")
+                app.save_seeds(target)
+                app.notify("Saved", f"seeds written to {target}", "success", event.client)
+
+            app.guard("Save seeds", event.client, run)
+
+        upload = gui.add_upload_button("Upload seeds.json", mime_type=".json")
+
+        @upload.on_upload
+        def _(event: viser.GuiEvent) -> None:
+            app.load_seeds_upload(upload.value.content, client=event.client)
+
+    return SeedsPanel(path=path, load=load, save=save, upload=upload)
+
+
+def _calibrate_panel(gui: viser.GuiApi, app: ViewerApp) -> CalibratePanel:
+    with gui.add_folder("Calibrate"):
+        button = gui.add_button("Calibrate (PALM)", icon=viser.Icon.TARGET)
+
+        @button.on_click
+        def _(event: viser.GuiEvent) -> None:
+            app.calibrate(client=event.client)
+
+        markdown = gui.add_markdown("")
+    return CalibratePanel(button=button, markdown=markdown)
+
+
+def _results_panel(gui: viser.GuiApi, app: ViewerApp) -> ResultsPanel:
+    with gui.add_folder("Reconstruct"):
+        reconstruct = gui.add_button("Reconstruct", icon=viser.Icon.PLAYER_PLAY, color="green")
+
+        @reconstruct.on_click
+        def _(event: viser.GuiEvent) -> None:
+            reconstruct.disabled = True
+            try:
+                app.reconstruct(client=event.client)
+            finally:
+                reconstruct.disabled = False
+
+        progress = gui.add_progress_bar(0.0, animated=False)
+        view_all = gui.add_button("Camera: images + model", icon=viser.Icon.EYE)
+
+        @view_all.on_click
+        def _(event: viser.GuiEvent) -> None:
+            app.view_all()
+
+        markdown = gui.add_markdown("")
+        plot = gui.add_image(np.full((8, 8, 3), 255, np.uint8),
+                             label="Diameter along the vessel", visible=False)
+    return ResultsPanel(reconstruct=reconstruct, progress=progress, view_all=view_all,
+                        markdown=markdown, plot=plot)
+
+
+def _export_panel(gui: viser.GuiApi, app: ViewerApp) -> ExportPanel:
+    with gui.add_folder("Export"):
+        mesh_format = gui.add_dropdown("Mesh format", list(MESH_FORMATS))
+        mesh = gui.add_button("Download mesh", icon=viser.Icon.DOWNLOAD)
+
+        @mesh.on_click
+        def _(event: viser.GuiEvent) -> None:
+            app.download(mesh_format.value, client=event.client)
+
+        buttons = [
+            _download_button(gui, app, f"Download {kind}", kind)
+            for kind in ("centerline.csv", "report.json", "seeds.json")
+        ]
+    return ExportPanel(mesh_format=mesh_format, mesh=mesh, centerline_csv=buttons[0],
+                       report_json=buttons[1], seeds_json=buttons[2])
+
+
+def _download_button(gui: viser.GuiApi, app: ViewerApp, label: str,
+                     kind: str) -> viser.GuiButtonHandle:
+    button = gui.add_button(label, icon=viser.Icon.DOWNLOAD)
+
+    def on_click(event: viser.GuiEvent) -> None:
+        app.download(kind, client=event.client)
+
+    button.on_click(on_click)
+    return button
+

@@ -1,0 +1,127 @@
+"""The panels' texts: markdown made from the loaded pair, the marks and the results.
+
+Pure functions (no viser): the case table, the marks summary, the
+calibration table and the results tables, plus the texts shown before any
+calibration or reconstruction.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from recon.calibration import CalibrationResult
+    from recon.pipeline import Reconstruction
+    from recon.types import Angiogram
+    from viewer_app.state import MarkState
+
+__all__ = [
+    "NOT_CALIBRATED_TEXT",
+    "NO_RECONSTRUCTION_TEXT",
+    "angle_text",
+    "calibration_markdown",
+    "fmt",
+    "info_markdown",
+    "marks_markdown",
+    "results_markdown",
+]
+
+NO_RECONSTRUCTION_TEXT = "No reconstruction yet."
+NOT_CALIBRATED_TEXT = (
+    "Not calibrated: epipolar lines use the header geometry.\n\n"
+    "Tip: landmarks spread over the image (branch points and vessel ends far "
+    "from the lesion) fix view B's pose better than clicks near the lesion "
+    "(`coronary3d bench calibration`, landmark rows)."
+)
+
+
+def angle_text(alpha_deg: float, beta_deg: float) -> str:
+    """C-arm angles as a clinician reads them, e.g. ``"RAO 29.3° / CRA 25.5°"``."""
+    a = f"{'LAO' if alpha_deg >= 0 else 'RAO'} {abs(alpha_deg):.1f}°"
+    b = f"{'CRA' if beta_deg >= 0 else 'CAU'} {abs(beta_deg):.1f}°"
+    return f"{a} / {b}"
+
+
+def fmt(value: object) -> str:
+    """A table cell: floats to 3 significant digits (large ones whole), lists comma-joined."""
+    if isinstance(value, float | np.floating):
+        return f"{float(value):.3g}" if abs(float(value)) < 1e4 else f"{float(value):.0f}"
+    if isinstance(value, list | tuple):
+        return ", ".join(fmt(v) for v in value)
+    return str(value)
+
+
+def info_markdown(angio_a: Angiogram, angio_b: Angiogram, name_a: str, name_b: str) -> str:
+    """The case table: file, angles, SID / SOD, size and frame of views A and B."""
+    rows = ["| | A | B |", "| --- | --- | --- |"]
+    ga, gb = angio_a.geometry, angio_b.geometry
+    rows.append(f"| file | {name_a} | {name_b} |")
+    rows.append(f"| angles | {angle_text(ga.alpha_deg, ga.beta_deg)} | "
+                f"{angle_text(gb.alpha_deg, gb.beta_deg)} |")
+    rows.append(f"| SID / SOD (mm) | {ga.sid_mm:.0f} / {ga.sod_mm:.0f} | "
+                f"{gb.sid_mm:.0f} / {gb.sod_mm:.0f} |")
+    rows.append(f"| size | {ga.cols}×{ga.rows} | {gb.cols}×{gb.rows} |")
+    rows.append(f"| frame | {angio_a.frame_index + 1}/{angio_a.n_frames} | "
+                f"{angio_b.frame_index + 1}/{angio_b.n_frames} |")
+    return "\n".join(rows)
+
+
+def marks_markdown(state: MarkState, last_click_ms: float, autosave_path: str | Path) -> str:
+    """The marks summary: counts, what is still missing, the last warning, click time, autosave."""
+    seeds = state.to_seeds()
+    lines = [f"**{len(state.marks)} marks**: {len(seeds.segments)} complete segment(s), "
+             f"{len(seeds.features)} feature pair(s)."]
+    lines += [f"- {m}" for m in state.missing()[:6]]
+    if state.last_message:
+        lines.append(f"- ⚠ {state.last_message}")
+    if np.isfinite(last_click_ms):
+        lines.append(f"\nLast click → epipolar line: {last_click_ms:.1f} ms (server).")
+    lines.append(f"\nAutosave: `{autosave_path}`")
+    return "\n".join(lines)
+
+
+def calibration_markdown(res: CalibrationResult) -> str:
+    """Reprojection error before / after, view B's pose correction, iterations, warnings."""
+    rot_deg = float(np.degrees(np.linalg.norm(np.asarray(res.rotvec, float))))
+    t_mm = np.asarray(res.t_mm, dtype=float)
+    lines = [
+        "| | before | after |",
+        "| --- | --- | --- |",
+        f"| error (px) | {res.error_before_px:.2f} | {res.error_after_px:.2f} |",
+        f"| error (mm) | {res.error_before_mm:.2f} | {res.error_after_mm:.2f} |",
+        "",
+        f"Pose correction of B: **{rot_deg:.2f}°** rotation, **{np.linalg.norm(t_mm):.2f} mm**"
+        f" translation ({', '.join(f'{x:.2f}' for x in t_mm)} mm); "
+        f"{res.iterations} iterations, {res.elapsed_ms:.0f} ms.",
+    ]
+    lines += [f"- ⚠ {w}" for w in getattr(res, "warnings", ())]
+    return "\n".join(lines)
+
+
+def results_markdown(rec: Reconstruction) -> str:
+    """3D measurements, the Table-3 metrics (per-view sub-tables side by side) and timings."""
+    rows = ["| measurement | value |", "| --- | --- |"]
+    rows += [f"| {k} | {fmt(v)} |" for k, v in rec.measurements.to_dict().items()]
+    for view, other in (("a", "B"), ("b", "A")):
+        stretches = rec.centerline_3d.overlap_stretches_mm(view)
+        if stretches:
+            where = ", ".join(f"{a:.1f}-{b:.1f}" for a, b in stretches)
+            rows.append(f"| view {view.upper()} overlapped: radius from view {other} "
+                        f"| {where} mm |")
+    metrics = dict(rec.metrics)
+    per_view = {k: metrics.pop(k) for k in list(metrics) if isinstance(metrics[k], dict)}
+    if per_view:
+        names = list(per_view)
+        keys = [k for k in per_view[names[0]] if all(k in per_view[n] for n in names)]
+        rows += ["", "| Table 3 | " + " | ".join(f"view {n.upper()}" for n in names) + " |",
+                 "| --- |" + " --- |" * len(names)]
+        rows += [f"| {k} | " + " | ".join(fmt(per_view[n][k]) for n in names) + " |"
+                 for k in keys]
+    rows += ["", "| Table 3 (both views) | value |", "| --- | --- |"]
+    rows += [f"| {k} | {fmt(v)} |" for k, v in metrics.items()]
+    rows += ["", "| stage | ms |", "| --- | --- |"]
+    rows += [f"| {k} | {fmt(v)} |" for k, v in rec.timings_ms.items()]
+    return "\n".join(rows)
