@@ -2,20 +2,9 @@
 
 import numpy as np
 import pytest
+from support import EXAMPLE_SEEDS
 
 from recon.seeds import Feature, Seeds, SeedsError, Segment, seeds_from_dict
-
-EXAMPLE = {
-    "version": 1,
-    "segments": [
-        {
-            "name": "LAD mid",
-            "a": [[170.5, 54.1], [179.9, 139.1], [323.0, 261.2]],
-            "b": [[368.6, 101.1], [371.2, 177.0], [401.9, 331.4]],
-        }
-    ],
-    "features": [{"name": "D1 bifurcation", "a": [192.1, 160.3], "b": [379.0, 196.7]}],
-}
 
 
 def test_objects_build_the_same_dict():
@@ -29,7 +18,7 @@ def test_objects_build_the_same_dict():
 
 
 def test_the_documented_example_parses_and_round_trips():
-    seeds = seeds_from_dict(EXAMPLE, source="example")
+    seeds = seeds_from_dict(EXAMPLE_SEEDS, source="example")
     assert seeds.segments[0].name == "LAD mid"
     assert seeds.segments[0].a.shape == (3, 2)
     pa, pb, names = seeds.correspondences()

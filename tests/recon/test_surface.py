@@ -1,5 +1,6 @@
 import numpy as np
 import pytest
+from support import centerline_3d, straight
 
 from recon.geometry import ViewGeometry
 from recon.surface import (
@@ -16,30 +17,6 @@ VIEW_B = ViewGeometry(30.0, 0.0, 1000.0, 750.0, (0.39, 0.39), 512, 512)
 # AP and lateral: for a vessel along z the two intersection lines are x and y.
 VIEW_AP = ViewGeometry(0.0, 0.0, 1000.0, 750.0, (0.39, 0.39), 512, 512)
 VIEW_LAT = ViewGeometry(90.0, 0.0, 1000.0, 750.0, (0.39, 0.39), 512, 512)
-
-
-def centerline(X, r_a, r_b=None):
-    X = np.asarray(X, dtype=float)
-    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(X, axis=0), axis=1))])
-    t = np.gradient(X, s, axis=0)
-    t /= np.linalg.norm(t, axis=1, keepdims=True)
-    r_a = np.broadcast_to(np.asarray(r_a, dtype=float), (len(X),)).copy()
-    r_b = r_a.copy() if r_b is None else np.broadcast_to(r_b, (len(X),)).astype(float)
-    return Centerline3D(
-        X_world=X,
-        s_mm=s,
-        tangents=t,
-        radius_a_mm=r_a,
-        radius_b_mm=r_b,
-        X_raw_world=X,
-        points_a_px=np.zeros((len(X), 2)),
-        points_b_px=np.zeros((len(X), 2)),
-    )
-
-
-def straight(length=40.0, direction=(0.6, 0.0, 0.8), origin=(0.0, 3.0, 0.0), step=0.25):
-    t = np.arange(0.0, length + 1e-9, step) - length / 2
-    return np.asarray(origin) + t[:, None] * np.asarray(direction) / np.linalg.norm(direction)
 
 
 def helix(radius=12.0, pitch=15.0, turns=0.8, step=0.25):
@@ -70,7 +47,7 @@ def assert_clean_closed_mesh(mesh):
 
 # --------------------------------------------------------------- sections
 def test_straight_tube_has_circular_sections_of_the_given_radius():
-    cl = centerline(straight(), 1.5)
+    cl = centerline_3d(straight(), 1.5)
     sec = elliptic_cross_sections(cl, VIEW_A, VIEW_B)
     assert isinstance(sec, CrossSections) and len(sec) == len(cl.X_world)
     np.testing.assert_allclose(sec.major_mm, 1.5)
@@ -86,7 +63,7 @@ def test_straight_tube_has_circular_sections_of_the_given_radius():
 @pytest.mark.parametrize("r_a, r_b", [(2.0, 1.0), (1.0, 2.0)])
 def test_perpendicular_lines_give_major_and_minor_axes(r_a, r_b):
     X = straight(direction=(0.0, 0.0, 1.0), origin=(0.0, 0.0, 0.0))
-    sec = elliptic_cross_sections(centerline(X, r_a, r_b), VIEW_AP, VIEW_LAT)
+    sec = elliptic_cross_sections(centerline_3d(X, r_a, r_b), VIEW_AP, VIEW_LAT)
     np.testing.assert_allclose(sec.major_mm, 2.0)
     np.testing.assert_allclose(sec.minor_mm, 1.0, atol=1e-6)
     # View AP looks along y, so its diameter lies along x; the lateral view's along y.
@@ -98,7 +75,7 @@ def test_perpendicular_lines_give_major_and_minor_axes(r_a, r_b):
 
 def test_endpoint_of_the_shorter_line_lies_on_the_ellipse():
     X = straight(direction=(0.0, 0.0, 1.0), origin=(0.0, 0.0, 0.0))
-    cl = centerline(X, 2.0, 1.5)  # lines 60 degrees apart (views at -30 / +30)
+    cl = centerline_3d(X, 2.0, 1.5)  # lines 60 degrees apart (views at -30 / +30)
     sec = elliptic_cross_sections(cl, VIEW_A, VIEW_B)
     l_b = intersection_directions(cl.X_world, sec.normals, VIEW_B)
     p = 1.5 * l_b
@@ -110,7 +87,7 @@ def test_endpoint_of_the_shorter_line_lies_on_the_ellipse():
 
 def test_intersection_line_is_perpendicular_to_tangent_and_ray():
     X, _ = helix()
-    cl = centerline(X, 1.0)
+    cl = centerline_3d(X, 1.0)
     lines = intersection_directions(cl.X_world, cl.tangents, VIEW_A)
     rays = cl.X_world - VIEW_A.source_world
     np.testing.assert_allclose(np.einsum("ij,ij->i", lines, cl.tangents), 0.0, atol=1e-9)
@@ -126,7 +103,7 @@ def test_intersection_line_is_perpendicular_to_tangent_and_ray():
 
 
 def test_parallel_lines_fall_back_to_the_shorter_half_length():
-    cl = centerline(straight(), 2.0, 1.2)
+    cl = centerline_3d(straight(), 2.0, 1.2)
     sec = elliptic_cross_sections(cl, VIEW_A, VIEW_A)
     np.testing.assert_allclose(sec.major_mm, 2.0)
     np.testing.assert_allclose(sec.minor_mm, 1.2)
@@ -134,14 +111,14 @@ def test_parallel_lines_fall_back_to_the_shorter_half_length():
 
 def test_vessel_along_the_ray_still_gives_valid_sections():
     d = VIEW_AP.R_view_from_world[2]  # central ray of the AP view
-    cl = centerline(straight(direction=d, origin=(0.0, 0.0, 0.0)), 1.0, 1.0)
+    cl = centerline_3d(straight(direction=d, origin=(0.0, 0.0, 0.0)), 1.0, 1.0)
     sec = elliptic_cross_sections(cl, VIEW_AP, VIEW_LAT)
     assert np.all(np.isfinite(sec.major_axis)) and np.all(np.isfinite(sec.minor_mm))
     np.testing.assert_allclose(sec.minor_mm, 1.0)
 
 
 def test_bad_centerline_raises_value_error():
-    cl = centerline(straight(), 1.0)
+    cl = centerline_3d(straight(), 1.0)
     bad = Centerline3D(
         X_world=cl.X_world,
         s_mm=cl.s_mm,
@@ -161,7 +138,7 @@ def test_bad_centerline_raises_value_error():
 # ------------------------------------------------------------------ mesh
 def test_straight_tube_mesh_volume_and_outward_normals():
     r, length = 1.5, 40.0
-    cl = centerline(straight(length=length), r)
+    cl = centerline_3d(straight(length=length), r)
     res = build_surface(cl, VIEW_A, VIEW_B)
     assert isinstance(res, SurfaceResult)
     mesh = res.mesh
@@ -180,7 +157,7 @@ def test_straight_tube_mesh_volume_and_outward_normals():
 
 
 def test_point_cloud_lies_on_the_ellipses_and_caps():
-    cl = centerline(straight(length=10.0), 1.5)
+    cl = centerline_3d(straight(length=10.0), 1.5)
     res = build_surface(cl, VIEW_A, VIEW_B, n_angles=16)
     n_rings = 4
     assert res.point_cloud.shape == (len(cl.X_world) * 16 + 2 * (n_rings * 16 + 1), 3)
@@ -191,7 +168,7 @@ def test_point_cloud_lies_on_the_ellipses_and_caps():
 def test_helix_tube_mesh():
     r = 1.2
     X, arc = helix()
-    res = build_surface(centerline(X, r), VIEW_A, VIEW_B, voxel_mm=0.2)
+    res = build_surface(centerline_3d(X, r), VIEW_A, VIEW_B, voxel_mm=0.2)
     assert_clean_closed_mesh(res.mesh)
     expected = np.pi * r**2 * arc + 4.0 / 3.0 * np.pi * r**3
     assert res.mesh.volume == pytest.approx(expected, rel=0.02)
@@ -201,7 +178,7 @@ def test_helix_tube_mesh():
 
 def test_elliptic_tube_mesh_volume():
     X = straight(length=30.0, direction=(0.0, 0.0, 1.0), origin=(0.0, 0.0, 0.0))
-    res = build_surface(centerline(X, 2.0, 1.0), VIEW_AP, VIEW_LAT, voxel_mm=0.15)
+    res = build_surface(centerline_3d(X, 2.0, 1.0), VIEW_AP, VIEW_LAT, voxel_mm=0.15)
     assert_clean_closed_mesh(res.mesh)
     a, b = 2.0, 1.0
     expected = np.pi * a * b * 30.0 + 4.0 / 3.0 * np.pi * a * b * np.sqrt(a * b)
@@ -219,6 +196,6 @@ def test_tapering_stenosed_tube_is_closed():
     r = (2.0 - s / 60.0) * (
         1 - 0.6 * np.where(np.abs(s - 30) < 5, 0.5 * (1 + np.cos(2 * np.pi * (s - 30) / 10)), 0.0)
     )
-    res = build_surface(centerline(X, r, 0.9 * r), VIEW_A, VIEW_B)
+    res = build_surface(centerline_3d(X, r, 0.9 * r), VIEW_A, VIEW_B)
     assert_clean_closed_mesh(res.mesh)
 

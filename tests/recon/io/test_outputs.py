@@ -6,6 +6,7 @@ import json
 import numpy as np
 import pytest
 import trimesh
+from support import centerline_3d, straight
 
 from recon.errors import OutputError
 from recon.geometry import ViewGeometry
@@ -22,40 +23,15 @@ from recon.io.outputs import (
 from recon.io.seeds_file import load_seeds
 from recon.pipeline import reconstruct_pair
 from recon.surface import build_surface
-from recon.types import Centerline3D
 
 VIEW_A = ViewGeometry(-30.0, 0.0, 1000.0, 750.0, (0.39, 0.39), 512, 512)
 VIEW_B = ViewGeometry(30.0, 0.0, 1000.0, 750.0, (0.39, 0.39), 512, 512)
 
 
-def centerline(X, r_a, r_b=None):
-    X = np.asarray(X, dtype=float)
-    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(X, axis=0), axis=1))])
-    t = np.gradient(X, s, axis=0)
-    t /= np.linalg.norm(t, axis=1, keepdims=True)
-    r_a = np.broadcast_to(np.asarray(r_a, dtype=float), (len(X),)).copy()
-    r_b = r_a.copy() if r_b is None else np.broadcast_to(r_b, (len(X),)).astype(float)
-    return Centerline3D(
-        X_world=X,
-        s_mm=s,
-        tangents=t,
-        radius_a_mm=r_a,
-        radius_b_mm=r_b,
-        X_raw_world=X,
-        points_a_px=np.zeros((len(X), 2)),
-        points_b_px=np.zeros((len(X), 2)),
-    )
-
-
-def straight(length=40.0, direction=(0.6, 0.0, 0.8), origin=(0.0, 3.0, 0.0), step=0.25):
-    t = np.arange(0.0, length + 1e-9, step) - length / 2
-    return np.asarray(origin) + t[:, None] * np.asarray(direction) / np.linalg.norm(direction)
-
-
 # ---------------------------------------------------------------- export
 @pytest.fixture(scope="module")
 def tube_mesh():
-    return build_surface(centerline(straight(length=20.0), 1.5), VIEW_A, VIEW_B).mesh
+    return build_surface(centerline_3d(straight(length=20.0), 1.5), VIEW_A, VIEW_B).mesh
 
 
 @pytest.mark.parametrize("fmt", MESH_FORMATS)

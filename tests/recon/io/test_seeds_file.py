@@ -4,22 +4,11 @@ import json
 
 import numpy as np
 import pytest
+from support import EXAMPLE_SEEDS
 
 from recon.errors import OutputError
 from recon.io.seeds_file import load_seeds, save_seeds
 from recon.seeds import SeedsError
-
-EXAMPLE = {
-    "version": 1,
-    "segments": [
-        {
-            "name": "LAD mid",
-            "a": [[170.5, 54.1], [179.9, 139.1], [323.0, 261.2]],
-            "b": [[368.6, 101.1], [371.2, 177.0], [401.9, 331.4]],
-        }
-    ],
-    "features": [{"name": "D1 bifurcation", "a": [192.1, 160.3], "b": [379.0, 196.7]}],
-}
 
 
 def write(tmp_path, data, name="seeds.json"):
@@ -29,7 +18,7 @@ def write(tmp_path, data, name="seeds.json"):
 
 
 def test_reads_the_documented_example(tmp_path):
-    seeds = load_seeds(write(tmp_path, EXAMPLE))
+    seeds = load_seeds(write(tmp_path, EXAMPLE_SEEDS))
     assert seeds.segments[0].name == "LAD mid"
     assert seeds.segments[0].a.shape == (3, 2)
     pa, pb, names = seeds.correspondences()
@@ -40,7 +29,7 @@ def test_reads_the_documented_example(tmp_path):
 
 
 def test_version_is_optional_and_round_trip(tmp_path):
-    data = dict(EXAMPLE)
+    data = dict(EXAMPLE_SEEDS)
     data.pop("version")
     seeds = load_seeds(write(tmp_path, data))
     out = tmp_path / "sub" / "again.json"
@@ -77,7 +66,7 @@ def test_missing_file(tmp_path):
 
 
 def test_unwritable_path_is_an_output_error(tmp_path):
-    seeds = load_seeds(write(tmp_path, EXAMPLE))
+    seeds = load_seeds(write(tmp_path, EXAMPLE_SEEDS))
     blocker = tmp_path / "file"
     blocker.write_text("")
     with pytest.raises(OutputError) as info:
