@@ -105,6 +105,7 @@ class Centerline2D:
         what the vessel profiles showed), or None.
     intensity_power : Box-Cox power of the stored values the radius fit used
         (0 = -log, values linear in intensity; 1 = linear in attenuation), or None.
+    blur_px : Gaussian blur (px) of the radius model the fit used, or None.
     """
 
     points_px: FloatArray
@@ -115,6 +116,7 @@ class Centerline2D:
     intensity_mapping: str | None = None
     intensity_reason: str | None = None
     intensity_power: float | None = None
+    blur_px: float | None = None
 
     def __post_init__(self) -> None:
         n = len(self.points_px)

@@ -31,15 +31,20 @@ def render(
 ) -> np.ndarray:
     """Beer-Lambert tubes (centre (M, 2) dense, radius (M,)) blurred by sigma 0.7 px.
 
-    I = 1000 exp(-0.08 * chord), chord = 2 sqrt(r^2 - d^2); optional black border.
+    I = 1000 exp(-0.08 * chord), chord = 2 sqrt(r^2 - d^2) averaged over each pixel's
+    area (4 x 4 rays: a detector integrates over its pixels); optional black border.
     """
     h, w = shape
     rr, cc = np.mgrid[0:h, 0:w]
-    pix = np.column_stack([cc.ravel(), rr.ravel()]).astype(float)
+    sub = (np.arange(4) + 0.5) / 4 - 0.5
     line = np.zeros(h * w)
     for centre, radius in tubes:
-        d, i = cKDTree(centre).query(pix)
-        line += 2.0 * np.sqrt(np.clip(radius[i] ** 2 - d**2, 0.0, None))
+        tree = cKDTree(centre)
+        for dy in sub:
+            for dx in sub:
+                pix = np.column_stack([(cc + dx).ravel(), (rr + dy).ravel()])
+                d, i = tree.query(pix)
+                line += 2.0 * np.sqrt(np.clip(radius[i] ** 2 - d**2, 0.0, None)) / 16.0
     img = ndi.gaussian_filter(1000.0 * np.exp(-0.08 * line.reshape(h, w)), 0.7)
     if noise:
         img = img + np.random.default_rng(seed).normal(0.0, noise, img.shape)
@@ -89,13 +94,15 @@ def test_vesselness_does_not_modify_input() -> None:
 
 # ----------------------------------------------------------------- snapping
 def test_snap_finds_a_faint_vessel_beside_a_strong_one() -> None:
-    """Vesselness is normalised per image, so a thin distal vessel may stay below the
-    global ridge threshold; a click on it must still snap onto it."""
+    """The display response is normalised per image, so a thin distal vessel stays
+    low there; the ridge measure the tracing uses is normalised by the background,
+    so the faint vessel scores like the strong one and a click on it snaps onto it."""
     strong, faint = segment((10, 30), (150, 30)), segment((10, 90), (150, 90))
     img = render((120, 160), [(strong, np.full(len(strong), 5.0)),
                               (faint, np.full(len(faint), 1.2))], noise=2.0)
     vmap = compute_vesselness(img)
-    assert vmap.response[86:95, 40:120].max() < 0.15  # below the global threshold
+    assert vmap.response[86:95, 40:120].max() < 0.15  # below the display threshold
+    assert vmap.ridge[86:95, 40:120].max() > 0.8 * vmap.ridge[26:35, 40:120].max()
     snapped, dist = snap_click(vmap, (80.0, 92.5))
     assert abs(snapped[1] - 90.0) <= 1.0 and dist < 3.5
     with pytest.raises(TraceError, match="from any vessel"):
@@ -306,3 +313,21 @@ def test_reliability_downweights_wide_or_poor_fits() -> None:
     assert w[80:110].max() < 0.1
     assert w[150:155].max() < 0.1
     assert w[30] < 0.01
+
+
+# ------------------------------------------------------- what the trace records
+def test_trace_records_its_intensity_mapping_and_blur() -> None:
+    line = segment((10, 40), (150, 40))
+    img = render((80, 160), [(line, np.full(len(line), 3.0))], noise=3.0)
+    cl = trace_segment(img, [(15.0, 40.0), (145.0, 40.0)], relationship="LIN",
+                       pixel_mm=0.29)
+    assert cl.intensity_mapping == "lin" and cl.intensity_power == 0.0
+    assert cl.intensity_reason.startswith("PixelIntensityRelationship is LIN")
+    assert "\n" not in cl.intensity_reason
+    assert 0.5 < cl.blur_px < 1.2  # fitted around the nominal 0.7 px
+    fixed = trace_segment(img, [(15.0, 40.0), (145.0, 40.0)], intensity="log",
+                          estimate_blur=False)
+    assert fixed.intensity_mapping == "log" and fixed.blur_px == pytest.approx(0.7)
+    assert "set by the user" in fixed.intensity_reason
+    with pytest.raises(ValueError, match="intensity must be one of"):
+        trace_segment(img, [(15.0, 40.0), (145.0, 40.0)], intensity="gamma")

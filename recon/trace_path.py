@@ -1,0 +1,404 @@
+"""Orientation-aware minimal path through the snapped clicks, and checks of the result.
+
+The route is a shortest path in a graph whose nodes are (pixel, heading) pairs
+for 16 headings, built only on the pixels of a band where the vessel is
+(the ridge response around the clicked vessel, not the whole image). A move
+goes ``L`` px (2-4, about one lumen radius) along the new heading, which
+differs from the current one by at most one step (22.5 deg), so the path's
+radius of curvature is at least about 2.5 L and it cannot double back; a turn
+inside a crossing costs more (below), so it goes straight through. Each heading
+of L = 4 also has moves of 3 px (so every pixel of a narrow band is reachable).
+This is a discrete form of the minimal paths in the space of positions and
+orientations (Peter et al., "Robust Geodesic Methods on SE(2)", 2015; Bekkers
+et al., "A PDE approach to data-driven sub-Riemannian geodesics in SE(2)",
+SIAM J. Imaging Sci. 2015).
+
+Cost of a move (summed along its pixels): ``w = ((1 + eps) / (eps + V))^2`` on the
+contrast-invariant response V, times ``1 + a V sin^2(heading - vessel direction)``
+(moving across a vessel costs more), plus ``b (log sigma_q - log sigma_p)^2`` (scale
+continuity: hopping from a small vessel onto a large neighbour costs) and
+``c (1 + d J)`` per heading step turned, J the junction measure (a dark blob: a
+crossing's centre) near the pixel: inside a crossing the route goes straight.
+Solved with ``scipy.sparse.csgraph.dijkstra`` (Dijkstra 1959) from several
+start nodes (``min_only``).
+
+Checks of a traced centerline (:func:`find_route_problem`): a stretch off the
+vessel, a hairpin (the route doubling back) or a stretch that runs over an
+earlier part of the route.
+
+Pixels are (col, row), 0-based.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import ndimage as ndi
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import dijkstra
+from scipy.spatial import cKDTree
+
+from recon.trace_error import TraceError
+from recon.vesselness import RADIUS_PER_SIGMA, VesselnessMap
+
+__all__ = ["Route", "minimal_route", "RouteProblem", "find_route_problem", "N_HEADINGS"]
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+
+N_HEADINGS = 16
+#: Floor of the response in the pixel cost (a background pixel costs ~(1/eps)^2).
+_EPS = 0.05
+#: Extra cost factor of moving straight across a vessel.
+_ACROSS = 2.0
+#: Cost of one heading step (22.5 deg) turned.
+_TURN = 0.3
+#: The turn cost is multiplied by 1 + this x the junction measure near the pixel: inside
+#: a crossing a route goes straight (a loop is followed round, not cut across), and
+#: turns into a branch only where nothing straight leads on.
+_JUNCTION_TURN = 30.0
+#: Cost per (change of log scale)^2 between a move's ends.
+_SCALE_JUMP = 10.0
+#: Move length per lumen radius, at most _MAX_MOVE_PX (the path's radius of curvature
+#: is >= ~2.5 moves; longer moves would leave pixels of a narrow band unreachable:
+#: the 16 integer moves of length 8 change the row by 0, 3, 6, 7 or 8 only).
+_MOVE_PER_RADIUS = 1.0
+_MAX_MOVE_PX = 4
+#: At a waypoint the heading may change by at most this many steps (90 deg).
+_WAYPOINT_TURN = 4
+
+
+@dataclass(frozen=True)
+class Route:
+    """A pixel path through the clicks.
+
+    Attributes
+    ----------
+    path_px : (M, 2) float (col, row), about 1 px apart, first and last = the end clicks.
+    click_index : (K,) int, index in ``path_px`` of each click.
+    move_px : the move length L (px) of the graph.
+    """
+
+    path_px: FloatArray
+    click_index: IntArray
+    move_px: int
+
+
+def _headings(move_px: int) -> tuple[IntArray, FloatArray]:
+    """Integer moves (16, 2) (dcol, drow) of about ``move_px`` along 16 headings, and
+    the headings' angles (16,) in radians."""
+    theta = 2.0 * np.pi * np.arange(N_HEADINGS) / N_HEADINGS
+    d = np.rint(move_px * np.column_stack([np.cos(theta), np.sin(theta)])).astype(np.int64)
+    return d, np.arctan2(d[:, 1], d[:, 0]).astype(float)
+
+
+def _crop_box(clicks_px: FloatArray, shape: tuple[int, int], radius_px: float) -> tuple[int, ...]:
+    h, w = shape
+    lo, hi = clicks_px.min(axis=0), clicks_px.max(axis=0)
+    margin = 20.0 + 0.15 * float(np.max(hi - lo)) + 3.0 * radius_px
+    c0, r0 = np.maximum(np.floor(lo - margin), 0).astype(int)
+    c1 = int(min(np.ceil(hi[0] + margin) + 1, w))
+    r1 = int(min(np.ceil(hi[1] + margin) + 1, h))
+    return int(r0), int(r1), int(c0), int(c1)
+
+
+class _Graph:
+    """The (pixel, heading) graph on a band of a crop."""
+
+    def __init__(self, band: NDArray[np.bool_], resp: FloatArray, log_scale: FloatArray,
+                 direction: FloatArray, move_px: int, junction: FloatArray) -> None:
+        h, w = band.shape
+        self.shape = (h, w)
+        self.rows, self.cols = np.nonzero(band)
+        n = len(self.rows)
+        self.index = np.full((h, w), -1, dtype=np.int64)
+        self.index[self.rows, self.cols] = np.arange(n)
+        cost_px = ((1.0 + _EPS) / (_EPS + resp)) ** 2  # (h, w), 1 on a full-strength ridge
+        turn = _TURN * (1.0 + _JUNCTION_TURN * junction[self.rows, self.cols])  # (n,)
+        src, dst, wt = [], [], []
+        # For L = 4 two move lengths, 4 and 3: integer moves of length 4 alone change
+        # the row by 0, 2, 3 or 4 only, and miss pixels of a narrow band (L <= 3 reach
+        # all). Their offsets differ, so every (node, node) pair has one edge.
+        # sin^2(h - phi) = (1 - cos 2h cos 2phi - sin 2h sin 2phi) / 2
+        across = _ACROSS * resp * cost_px / 2.0
+        terms = (cost_px + across, -across * np.cos(2 * direction),
+                 -across * np.sin(2 * direction))
+        for length_px in ((int(move_px),) if move_px <= 3 else (int(move_px), int(move_px) - 1)):
+            q, ok, move = self._moves(length_px, terms, log_scale)
+            pi, ki = np.nonzero(ok)
+            qi, mv, tn = q[pi, ki], move[pi, ki], turn[pi]
+            for dk in (-1, 0, 1):  # edges (p, k - dk) -> (q, k)
+                src.append(pi * N_HEADINGS + (ki - dk) % N_HEADINGS)
+                dst.append(qi * N_HEADINGS + ki)
+                wt.append(mv + tn * abs(dk))
+        m = n * N_HEADINGS
+        self.graph = csr_matrix(
+            (np.concatenate(wt), (np.concatenate(src), np.concatenate(dst))), shape=(m, m))
+        self.cost_px = cost_px
+
+    def _moves(self, length_px: int, terms: tuple[FloatArray, FloatArray, FloatArray],
+               log_scale: FloatArray):
+        """For every band pixel and heading, the move of ``length_px``: end node (n, 16)
+        (-1 off the band), whether it stays on the band, and its cost (n, 16).
+
+        The pixel cost w (1 + a V sin^2(heading - direction)) is A + B cos 2h + D sin 2h
+        with per-pixel maps ``terms`` = (A, B, D); it is averaged at the move's
+        middle and end.
+        """
+        h, w = self.shape
+        d, theta = _headings(length_px)
+        qc = self.cols[:, None] + d[None, :, 0]  # (n, 16)
+        qr = self.rows[:, None] + d[None, :, 1]
+        inside = (qc >= 0) & (qc < w) & (qr >= 0) & (qr < h)
+        q = np.where(inside, self.index[np.clip(qr, 0, h - 1), np.clip(qc, 0, w - 1)], -1)
+        ok = q >= 0
+        flat = []
+        for t in (0.5, 1.0):
+            sc = np.clip(np.rint(self.cols[:, None] + t * d[None, :, 0]), 0, w - 1)
+            sr = np.clip(np.rint(self.rows[:, None] + t * d[None, :, 1]), 0, h - 1)
+            flat.append((sr * w + sc).astype(np.int64))  # (n, 16)
+        a_map, b_map, d_map = (m.ravel() for m in terms)
+        mean = [0.5 * (m[flat[0]] + m[flat[1]]) for m in (a_map, b_map, d_map)]
+        per_px = mean[0] + np.cos(2 * theta)[None] * mean[1] + np.sin(2 * theta)[None] * mean[2]
+        move = np.hypot(d[:, 0], d[:, 1])[None, :] * per_px
+        qq = np.where(ok, q, 0)
+        jump = log_scale[self.rows[qq], self.cols[qq]] - log_scale[self.rows, self.cols][:, None]
+        return q, ok, move + _SCALE_JUMP * jump**2
+
+    def node_pixels(self, nodes: IntArray) -> tuple[IntArray, IntArray]:
+        p = nodes // N_HEADINGS
+        return self.rows[p], self.cols[p]
+
+    def solve(self, start_rc: tuple[int, int], headings: IntArray, end_rc: tuple[int, int],
+              reach_px: float) -> tuple[IntArray | None, int]:
+        """Cheapest node chain from the start pixel (any of ``headings``) to a band pixel
+        within ``reach_px`` of the end; (None, nearest reached band pixel) if none."""
+        p0 = self.index[start_rc]
+        sources = p0 * N_HEADINGS + headings
+        dist, pred, _ = dijkstra(self.graph, directed=True, indices=sources, min_only=True,
+                                 return_predecessors=True)
+        per_pixel = dist.reshape(-1, N_HEADINGS)
+        d_end = np.hypot(self.rows - end_rc[0], self.cols - end_rc[1])
+        near = d_end <= reach_px
+        finite = np.isfinite(per_pixel)
+        if not np.any(finite[near]):
+            reached = np.nonzero(finite.any(axis=1))[0]
+            return None, int(reached[np.argmin(d_end[reached])]) if len(reached) else int(p0)
+        total = per_pixel + (d_end * self.cost_px[self.rows, self.cols])[:, None]
+        total = np.where(near[:, None] & finite, total, np.inf)
+        node = int(np.argmin(total))
+        chain = [node]
+        while pred[chain[-1]] >= 0:
+            chain.append(int(pred[chain[-1]]))
+        return np.asarray(chain[::-1], dtype=np.int64), node // N_HEADINGS
+
+
+def _chord_points(a: FloatArray, b: FloatArray) -> FloatArray:
+    """Points (n, 2) from a (excluded) to b (included), about 1 px apart."""
+    n = max(int(np.ceil(np.hypot(*(b - a)))), 1)
+    t = np.arange(1, n + 1)[:, None] / n
+    return a[None, :] * (1.0 - t) + b[None, :] * t
+
+
+def minimal_route(
+    vmap: VesselnessMap, clicks_px: FloatArray, *, view: str = "A"
+) -> Route:
+    """Orientation-aware minimal path (module docstring) through the clicks in order.
+
+    Parameters
+    ----------
+    vmap : the image's vesselness (with ``direction_rad``).
+    clicks_px : (K >= 2, 2) snapped clicks (col, row), on the vessel.
+    view : view name used in error messages.
+
+    Raises
+    ------
+    TraceError if no band path joins two consecutive clicks (the vessel is
+    interrupted); the message names the clicks and the place.
+    """
+    clicks = np.asarray(clicks_px, dtype=float)
+    h, w = vmap.shape
+    r_click = vmap.radius_px_at(clicks)
+    r_ref = float(np.median(r_click))
+    move_px = int(np.clip(np.rint(_MOVE_PER_RADIUS * r_ref), 2, _MAX_MOVE_PX))
+    r0, r1, c0, c1 = _crop_box(clicks, (h, w), float(r_click.max()))
+    resp = (vmap.response if vmap.ridge is None else vmap.ridge)[r0:r1, c0:c1].astype(float)
+    log_scale = np.log(np.maximum(vmap.scale_px[r0:r1, c0:c1].astype(float), 1e-3))
+    direction = (np.zeros_like(resp) if vmap.direction_rad is None
+                 else vmap.direction_rad[r0:r1, c0:c1].astype(float))
+    junction = (np.zeros_like(resp) if vmap.junction is None
+                else ndi.grey_dilation(vmap.junction[r0:r1, c0:c1].astype(float),
+                                       size=max(3, 2 * int(round(r_ref)) + 1)))
+    local = clicks - [c0, r0]
+    rc = [(int(np.clip(np.rint(p[1]), 0, r1 - r0 - 1)), int(np.clip(np.rint(p[0]), 0, c1 - c0 - 1)))
+          for p in local]
+    # The band: pixels responding at least half as strongly as the clicked vessel
+    # (relative to the clicks, not to the image), and the clicks themselves.
+    v_click = np.array([resp[r, c] for r, c in rc])
+    tau = float(np.clip(0.5 * v_click.min(), 0.05, 0.5))
+    core = resp >= tau
+    seeds = np.zeros_like(core)
+    for r, c in rc:
+        seeds[max(r - 1, 0) : r + 2, max(c - 1, 0) : c + 2] = True
+    last_err: TraceError | None = None
+    for grow in (0, 2, 6):  # widen the band when a faint stretch breaks it
+        band = (ndi.binary_dilation(core, iterations=grow) if grow else core) | seeds
+        labels, _ = ndi.label(band, structure=np.ones((3, 3)))
+        keep = np.unique([labels[r, c] for r, c in rc])
+        band = np.isin(labels, keep[keep > 0])  # only the pieces the clicks are on
+        graph = _Graph(band, resp, log_scale, direction, move_px, junction)
+        try:
+            return _route_on(graph, local, rc, move_px, (c0, r0), view, r_ref)
+        except TraceError as err:
+            last_err = err
+    assert last_err is not None
+    raise last_err
+
+
+def _route_on(graph: _Graph, local: FloatArray, rc: list[tuple[int, int]], move_px: int,
+              origin: tuple[int, int], view: str, radius_px: float) -> Route:
+    pieces = [local[:1]]
+    click_index = [0]
+    headings = np.arange(N_HEADINGS)
+    for i in range(len(local) - 1):
+        chain, last = graph.solve(rc[i], headings, rc[i + 1], reach_px=float(move_px))
+        if chain is None and i > 0:
+            free, _ = graph.solve(rc[i], np.arange(N_HEADINGS), rc[i + 1], float(move_px))
+            if free is not None:  # reachable only by turning back at the waypoint
+                near = local[i] + np.asarray(origin, float)
+                raise TraceError(
+                    f"view {view}: the trace doubles back at click {i + 1} "
+                    f"({near[0]:.0f}, {near[1]:.0f}): click {i + 2} lies back along the "
+                    f"vessel; put the clicks in order along the vessel",
+                    view=view, near_px=near,
+                )
+        if chain is None:
+            near = np.array([graph.cols[last], graph.rows[last]], float) + origin
+            raise TraceError(
+                f"view {view}: no vessel path between click {i + 1} and click {i + 2}: the "
+                f"vessel is interrupted after ({near[0]:.0f}, {near[1]:.0f}); add a waypoint "
+                "where it continues, or check that both clicks are on the same vessel",
+                view=view, near_px=near,
+            )
+        rows, cols = graph.node_pixels(chain)
+        pts = np.column_stack([cols, rows]).astype(float)
+        pts[0] = local[i]
+        pts = np.vstack([pts, local[i + 1]])
+        new = [_chord_points(a, b) for a, b in zip(pts[:-1], pts[1:], strict=True)
+               if np.hypot(*(b - a)) > 1e-9]
+        if i > 0 and new and _turns_back(np.concatenate(pieces), np.concatenate(new),
+                                         radius_px):
+            near = local[i] + np.asarray(origin, float)
+            raise TraceError(
+                f"view {view}: the trace doubles back at click {i + 1} "
+                f"({near[0]:.0f}, {near[1]:.0f}): click {i + 2} lies back along the "
+                f"vessel; put the clicks in order along the vessel",
+                view=view, near_px=near,
+            )
+        pieces.extend(new)
+        click_index.append(sum(len(p) for p in pieces) - 1)
+        k_end = int(chain[-1] % N_HEADINGS)
+        steps = np.arange(-_WAYPOINT_TURN, _WAYPOINT_TURN + 1)
+        headings = (k_end + steps) % N_HEADINGS
+    path = np.concatenate(pieces) + np.asarray(origin, float)
+    return Route(path_px=path, click_index=np.asarray(click_index, dtype=np.int64),
+                 move_px=move_px)
+
+
+def _turns_back(before: FloatArray, after: FloatArray, radius_px: float) -> bool:
+    """Whether the route after a waypoint (M, 2) runs back over the route before it
+    (N, 2): more than max(3 r, 6) px of it, beyond 2 r + 4 px of the waypoint, lies
+    within max(1.5, r) px of the earlier route."""
+    lead = np.cumsum(np.r_[0.0, np.linalg.norm(np.diff(after, axis=0), axis=1)])
+    far = lead > 2.0 * radius_px + 4.0
+    if not np.any(far):
+        return False
+    d, _ = cKDTree(before).query(after[far])
+    step = float(np.median(np.diff(lead))) if len(lead) > 1 else 1.0
+    return float(np.count_nonzero(d <= max(1.5, radius_px))) * step > max(3 * radius_px, 6.0)
+
+
+# ------------------------------------------------------------------- checks
+@dataclass(frozen=True)
+class RouteProblem:
+    """What is wrong with a traced centerline, and where.
+
+    kind : "leaves the vessel", "doubles back" or "runs back over itself".
+    index : index of the point (in the checked centerline) nearest the place.
+    """
+
+    kind: str
+    index: int
+
+
+def _runs(mask: NDArray[np.bool_]) -> list[tuple[int, int]]:
+    """(start, stop) index ranges of the True runs of a 1-D mask."""
+    m = np.concatenate([[False], mask, [False]]).astype(np.int8)
+    edges = np.diff(m)
+    return list(zip(np.nonzero(edges == 1)[0], np.nonzero(edges == -1)[0], strict=True))
+
+
+def find_route_problem(
+    points_px: FloatArray, radius_px: FloatArray, on_vessel: NDArray[np.bool_]
+) -> RouteProblem | None:
+    """The first problem of a centerline (N, 2) at uniform arc length, or None.
+
+    Parameters
+    ----------
+    points_px : (N, 2) centerline (col, row), uniform spacing.
+    radius_px : (N,) fitted lumen radius.
+    on_vessel : (N,) bool, where the centerline lies on a dark ridge.
+
+    Returns
+    -------
+    RouteProblem for the first of: a stretch off the vessel longer than
+    max(2 r, 4 px); a hairpin (the heading reverses within max(8 r, 20) px of arc
+    while the ends stay within a third of that); a stretch longer than
+    max(6 r, 12 px) that lies within max(1.5, 0.7 r) px of a part of the route
+    more than 6 r + 6 px of arc away (a transversal crossing of a loop is shorter).
+    """
+    n = len(points_px)
+    if n < 4:
+        return None
+    step = float(np.median(np.linalg.norm(np.diff(points_px, axis=0), axis=1)))
+    step = max(step, 1e-6)
+    r_ref = float(np.median(radius_px))
+    # Off the vessel.
+    min_off = max(2.0 * r_ref, 4.0) / step
+    for a, b in _runs(~np.asarray(on_vessel, bool)):
+        if b - a > min_off:
+            return RouteProblem("leaves the vessel", int((a + b) // 2))
+    # Doubling back: the heading reverses within a short arc.
+    t = np.gradient(points_px, axis=0)
+    t /= np.maximum(np.linalg.norm(t, axis=1, keepdims=True), 1e-12)
+    win = int(max(8.0 * r_ref, 20.0) / step)
+    if win < n:
+        lags = np.arange(max(int(2.0 / step), 1), win + 1)
+        i = np.arange(n)[:, None]
+        j = np.minimum(i + lags[None, :], n - 1)
+        dots = np.einsum("nlk,nlk->nl", np.broadcast_to(t[:, None, :], (n, len(lags), 2)), t[j])
+        chord = np.linalg.norm(points_px[j] - points_px[:, None, :], axis=2)
+        hair = (dots < -0.7) & (chord < (lags[None, :] * step) / 3.0) & (i + lags[None, :] < n)
+        if np.any(hair):
+            ii, ll = np.nonzero(hair)
+            k = int(np.argmin(dots[ii, ll]))
+            return RouteProblem("doubles back", int(ii[k] + lags[ll[k]] // 2))
+    # Running over an earlier part of the route.
+    close = max(1.5, 0.7 * r_ref)
+    pairs = cKDTree(points_px).query_pairs(close, output_type="ndarray")
+    if len(pairs):
+        far = np.abs(pairs[:, 1] - pairs[:, 0]) * step > 6.0 * r_ref + 6.0
+        over = np.zeros(n, dtype=bool)
+        over[pairs[far].ravel()] = True
+        min_over = max(6.0 * r_ref, 12.0) / step
+        for a, b in _runs(over):
+            if b - a > min_over:
+                return RouteProblem("runs back over itself", int((a + b) // 2))
+    return None
+
+
+def radius_from_scale(scale_px: FloatArray) -> FloatArray:
+    """Lumen radius (px) of a vessel whose best Hessian scale is ``scale_px``."""
+    return RADIUS_PER_SIGMA * np.asarray(scale_px, dtype=float)
