@@ -27,8 +27,10 @@ import numpy as np
 from recon import __version__
 from recon.calibration import CalibrationResult, calibrate, refine_with_matches
 from recon.centerline import VesselnessMap, compute_vesselness, trace_segment
+from recon.consistency import ConsistencyResult, check_consistency
 from recon.errors import CoronaryError
 from recon.geometry import ViewGeometry, view_separation_deg
+from recon.intensity import resolve_mapping
 from recon.matching import match_centerlines
 from recon.measure import LumenProfile, Measurements, lumen_profile, measure_lumen
 from recon.seeds import Seeds
@@ -41,6 +43,8 @@ __all__ = [
     "ReconstructionOptions",
     "Reconstruction",
     "calibrate_from_seeds",
+    "input_warnings",
+    "pixel_mm_at_vessel",
     "reconstruct_pair",
 ]
 
@@ -62,6 +66,10 @@ class ReconstructionOptions:
         default: the pairs are matched under the geometry being refined, so
         they largely agree with it (docs/benchmarks.md has the measurement).
     spacing_mm : arc-length spacing of the 3D centerline.
+    intensity_a, intensity_b : how each view's stored values relate to the
+        attenuation: "lin" (linear in X-ray intensity), "log" (linear in
+        attenuation) or "auto" (the file's PixelIntensityRelationship when it
+        says LIN or LOG, else estimated from the image; :mod:`recon.intensity`).
     voxel_mm : surface grid size (None: chosen from the vessel radius).
     """
 
@@ -71,6 +79,8 @@ class ReconstructionOptions:
     self_calibration: bool = False
     spacing_mm: float = 0.25
     voxel_mm: float | None = None
+    intensity_a: str = "auto"
+    intensity_b: str = "auto"
 
 
 @dataclass(frozen=True, eq=False)
@@ -95,6 +105,10 @@ class Reconstruction:
     measurements: Measurements
     metrics: dict
     timings_ms: dict = field(default_factory=dict)
+    # cross-view check of the 3D centerline (recon.consistency), and one-line warnings
+    # about the inputs and the stretches that failed it
+    consistency: ConsistencyResult | None = None
+    warnings: tuple[str, ...] = ()
 
     def report(self) -> dict:
         """JSON-ready report: inputs, geometry, calibration, matching, measurements, timings."""
@@ -152,6 +166,13 @@ class Reconstruction:
                 "volume_mm3": float(self.surface.mesh.volume),
             },
             "measurements": self.measurements.to_dict(),
+            # how each view's stored values were taken to relate to attenuation, and why
+            "intensity": {
+                "a": _intensity_report(self.centerline_a),
+                "b": _intensity_report(self.centerline_b),
+            },
+            "consistency": self.consistency.to_dict() if self.consistency is not None else None,
+            "warnings": list(self.warnings),
             "timings_ms": self.timings_ms,
         }
 
@@ -224,10 +245,14 @@ def reconstruct_pair(
 
     # 1. Vessel centerline, radius and brightness in each view (sec. 3.3.1).
     _notify(progress, "tracing the vessel in both views", 0.0)
+    pixel_mm_a, pixel_mm_b = pixel_mm_at_vessel(view_a), pixel_mm_at_vessel(view_b_header)
     if vesselness is None:
-        vesselness = (compute_vesselness(angio_a.image), compute_vesselness(angio_b.image))
-    cl_a = trace_segment(angio_a.image, seg.a, vesselness=vesselness[0], view="A")
-    cl_b = trace_segment(angio_b.image, seg.b, vesselness=vesselness[1], view="B")
+        vesselness = (
+            compute_vesselness(angio_a.image, pixel_mm=pixel_mm_a),
+            compute_vesselness(angio_b.image, pixel_mm=pixel_mm_b),
+        )
+    cl_a = _trace(angio_a, seg.a, vesselness[0], "A", pixel_mm_a, options.intensity_a)
+    cl_b = _trace(angio_b, seg.b, vesselness[1], "B", pixel_mm_b, options.intensity_b)
     lap("trace")
 
     # 2. Calibrate view B on the corresponding features (eq. 5, PALM).
@@ -257,6 +282,14 @@ def reconstruct_pair(
     cl3d = build_centerline_3d(matching, view_a, cal.view_b, spacing_mm=options.spacing_mm)
     metrics = table3_metrics(cl3d, matching, view_a, cal.view_b)
     lap("triangulate")
+
+    # 5b. Cross-view consistency: the 3D centerline back on both images.
+    consistency = check_consistency(cl3d, view_a, cal.view_b, cl_a, cl_b,
+                                    vesselness[0].response, vesselness[1].response)
+    warnings = input_warnings(angio_a.info, "A") + input_warnings(angio_b.info, "B")
+    warnings += [f"view {st.view.upper()}, {st.start_mm:.1f}-{st.end_mm:.1f} mm of the 3D "
+                 f"centerline: {st.reason}" for st in consistency.stretches]
+    lap("consistency")
 
     # 6. Elliptic cross-sections and the watertight surface (sec. 3.5).
     _notify(progress, "building the surface mesh", 0.8)
@@ -290,7 +323,67 @@ def reconstruct_pair(
         measurements=measurements,
         metrics=metrics,
         timings_ms=timings,
+        consistency=consistency,
+        warnings=tuple(warnings),
     )
+
+
+def pixel_mm_at_vessel(view: ViewGeometry) -> float:
+    """Size (mm) of one detector pixel at the isocenter: spacing x SOD / SID."""
+    return float(np.mean(view.pixel_spacing_mm)) * view.sod_mm / view.sid_mm
+
+
+def _trace(
+    angio: Angiogram,
+    clicks_px: np.ndarray,
+    vmap: VesselnessMap,
+    view: str,
+    pixel_mm: float,
+    intensity: str,
+) -> Centerline2D:
+    """One view's trace, with the intensity mapping resolved once for its image."""
+    relationship = angio.info.get("pixel_intensity_relationship")
+    mapping = resolve_mapping(angio.image, relationship, intensity, vesselness=vmap)
+    return trace_segment(
+        angio.image,
+        clicks_px,
+        vesselness=vmap,
+        view=view,
+        pixel_mm=pixel_mm,
+        relationship=relationship,
+        intensity=mapping,
+    )
+
+
+def input_warnings(info: dict, view: str) -> list[str]:
+    """One line when an input's radii are less certain: an 8-bit, lossy or
+    display-processed image (PixelIntensityRelationship (0028,1040) other than
+    LIN/LOG), from ``Angiogram.info``; [] otherwise (or when not recorded)."""
+    words, details = [], []
+    bits = info.get("bits_stored")
+    if bits is not None and int(bits) <= 8:
+        words.append(f"{int(bits)}-bit")
+    if info.get("lossy"):
+        words.append("lossy")
+        details.append(info.get("transfer_syntax_name") or "lossy compression")
+    relationship = info.get("pixel_intensity_relationship")
+    if relationship is not None and str(relationship).upper() not in ("LIN", "LOG"):
+        words.append("display-processed")
+        details.append(f"PixelIntensityRelationship {relationship}")
+    if not words:
+        return []
+    more = f" ({'; '.join(details)})" if details else ""
+    return [f"view {view}: {', '.join(words)} image{more}; its radii are less certain"]
+
+
+def _intensity_report(cl: Centerline2D) -> dict:
+    """How a view's stored values were read: the mapping, why, and the fitted model."""
+    return {
+        "mapping": cl.intensity_mapping,
+        "reason": cl.intensity_reason,
+        "power": cl.intensity_power,
+        "blur_px": cl.blur_px,
+    }
 
 
 def _step(name: str, cal: CalibrationResult) -> dict:

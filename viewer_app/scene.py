@@ -44,6 +44,7 @@ __all__ = [
     "add_view_nodes",
     "clear_results",
     "draw_marks",
+    "draw_flagged",
     "draw_reconstruction",
     "frame_camera_on",
     "ray_to_px",
@@ -69,6 +70,7 @@ EPIPOLAR_COLOR = (255, 0, 255)
 TRACE_COLOR = (255, 140, 0)
 MESH_COLOR = (205, 70, 70, 255)
 BACKPROJ_COLOR = (0, 255, 160)
+FLAGGED_COLOR = (255, 30, 30)  # stretches the cross-view consistency check flagged
 
 FloatArray = NDArray[np.float64]
 
@@ -155,10 +157,12 @@ class View:
     def get_vesselness(self) -> object:
         """Vesselness of the current frame, computed once (recon.centerline)."""
         from recon.centerline import compute_vesselness
+        from recon.pipeline import pixel_mm_at_vessel
 
         with self.vesselness_lock:
             if self.vesselness is None:
-                self.vesselness = compute_vesselness(self.angio.image)
+                pixel_mm = pixel_mm_at_vessel(self.angio.geometry)
+                self.vesselness = compute_vesselness(self.angio.image, pixel_mm=pixel_mm)
             return self.vesselness
 
 
@@ -254,7 +258,8 @@ def clear_results(scene: viser.SceneApi, views: Mapping[str, View]) -> None:
     for v in views.values():
         v.nodes.trace.points = np.zeros((0, 2, 3), np.float32)
         v.nodes.backproj.points = np.zeros((0, 2, 3), np.float32)
-    for name in ("/model",):
+    names = ["/model"] + [f"/view_{k}/{n}" for k in views for n in ("flagged", "flag_labels")]
+    for name in names:
         try:
             scene.remove_by_name(name)
         except Exception:
@@ -274,6 +279,7 @@ def draw_reconstruction(
             v.local_from_px(cl.points_px, z=OVERLAY_Z * 0.8)).astype(np.float32)
         v.nodes.backproj.points = polyline_segments(
             v.local_from_px(geom.project(X), z=OVERLAY_Z * 1.2)).astype(np.float32)
+    draw_flagged(scene, views, rec)
     # The model in view A's frame (x = columns, y = rows, z = away from the source),
     # so the first look at it matches view A; scaled to MODEL_SIZE, above the images.
     R = rec.view_a.R_view_from_world
@@ -298,6 +304,35 @@ def draw_reconstruction(
                               model_position[1] - MODEL_SIZE / 2, 0.0),
                     anchor="top-left")
     return model_position
+
+
+def draw_flagged(scene: viser.SceneApi, views: Mapping[str, View], rec: Reconstruction
+                 ) -> int:
+    """The stretches the cross-view consistency check flagged, in FLAGGED_COLOR on both
+    images (the 3D stretch projected), with a short label on the view it names.
+    Returns the number of stretches drawn."""
+    consistency = getattr(rec, "consistency", None)
+    stretches = tuple(getattr(consistency, "stretches", ()))
+    X = np.asarray(rec.centerline_3d.X_world, dtype=float)
+    s = np.asarray(rec.centerline_3d.s_mm, dtype=float)
+    for key, geom in (("a", rec.view_a), ("b", rec.view_b)):
+        v = views[key]
+        segments = []
+        for st in stretches:
+            keep = (s >= st.start_mm - 1e-6) & (s <= st.end_mm + 1e-6)
+            if keep.sum() >= 2:
+                segments.append(polyline_segments(
+                    v.local_from_px(geom.project(X[keep]), z=OVERLAY_Z * 1.4)))
+        seg = np.concatenate(segments) if segments else np.zeros((0, 2, 3))
+        scene.add_line_segments(f"/view_{key}/flagged", seg.astype(np.float32), FLAGGED_COLOR,
+                                thickness=5.0, thickness_units="screen")
+        for i, st in enumerate(st for st in stretches if st.view == key):
+            p = v.local_from_px(np.array([st.middle_px]), z=OVERLAY_Z * 1.6)[0]
+            scene.add_label(f"/view_{key}/flag_labels/s{i}",
+                            f"⚠ {st.kind.replace('_', ' ')} {st.start_mm:.0f}-{st.end_mm:.0f} mm",
+                            position=tuple(p + np.array([0.01, -0.01, 0.0])),
+                            anchor="bottom-left", font_screen_scale=0.8)
+    return len(stretches)
 
 
 def frame_camera_on(server: viser.ViserServer, centre: FloatArray, size: float) -> None:

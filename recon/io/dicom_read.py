@@ -24,7 +24,7 @@ from recon.errors import LoadError
 from recon.io.image_files import IMAGE_SUFFIXES
 from recon.io.raw import RawFile, first_line
 
-__all__ = ["XA_SOP_CLASS_UID", "read_dicom"]
+__all__ = ["LOSSY_TRANSFER_SYNTAXES", "XA_SOP_CLASS_UID", "is_lossy", "read_dicom"]
 
 XA_SOP_CLASS_UID = "1.2.840.10008.5.1.4.1.1.12.1"  # X-Ray Angiographic Image Storage
 
@@ -44,6 +44,32 @@ _PROJECTION_SOP_CLASSES = {
     "1.2.840.10008.5.1.4.1.1.7.3",  # Multi-frame Grayscale Word SC Image Storage
 }
 _PROJECTION_MODALITIES = {"XA", "RF", "DX", "CR", "OT"}
+
+# Transfer syntaxes whose compression may discard information (lossy, or "lossy
+# or lossless" where the file does not say which). pydicom's UID.is_compressed
+# is True for the lossless ones too, so they are listed here explicitly.
+LOSSY_TRANSFER_SYNTAXES = {
+    "1.2.840.10008.1.2.4.50": "JPEG Baseline (Process 1)",
+    "1.2.840.10008.1.2.4.51": "JPEG Extended (Process 2 & 4)",
+    **{f"1.2.840.10008.1.2.4.{k}": "JPEG lossy (retired process)"
+       for k in (52, 53, 54, 55, 56, 59, 60, 61, 62, 63, 64)},
+    "1.2.840.10008.1.2.4.81": "JPEG-LS Lossy (Near-Lossless)",
+    "1.2.840.10008.1.2.4.91": "JPEG 2000 (lossy or lossless)",
+    "1.2.840.10008.1.2.4.93": "JPEG 2000 Part 2 Multi-component (lossy or lossless)",
+    "1.2.840.10008.1.2.4.203": "HTJ2K (lossy or lossless)",
+    "1.2.840.10008.1.2.4.111": "JPEG XL JPEG Recompression",
+    "1.2.840.10008.1.2.4.112": "JPEG XL (lossy or lossless)",
+    **{f"1.2.840.10008.1.2.4.{k}": "MPEG/HEVC video"
+       for k in (100, 101, 102, 103, 104, 105, 106, 107, 108)},
+}
+
+
+def is_lossy(transfer_syntax: str, lossy_image_compression: object = None) -> bool:
+    """True for a lossy transfer syntax, or when LossyImageCompression (0028,2110)
+    is "01" (the pixels were lossy-compressed at some point, whatever the file's
+    transfer syntax is now)."""
+    return (str(transfer_syntax) in LOSSY_TRANSFER_SYNTAXES
+            or str(lossy_image_compression or "").strip() == "01")
 
 
 def _dicom_value(ds: Dataset, keyword: str) -> Any:
@@ -198,6 +224,13 @@ def read_dicom(path: str) -> RawFile:
         "inverted_on_load": photometric == "MONOCHROME1",
         "transfer_syntax": ts,
         "transfer_syntax_name": UID(ts).name if ts else "",
+        # raw PixelIntensityRelationship (0028,1040) (LIN, LOG, DISP, or vendor
+        # values such as DRM), None when absent; and whether the pixels are lossy
+        "pixel_intensity_relationship": (
+            str(ds.get("PixelIntensityRelationship")).strip() or None
+            if ds.get("PixelIntensityRelationship") is not None else None
+        ),
+        "lossy": is_lossy(ts, ds.get("LossyImageCompression")),
         "representative_frame_number": int(rep_number) if rep_number is not None else None,
         "r_wave_pointer": r_wave_pointer,
         "r_wave_frames": [k - 1 for k in r_wave_pointer if 1 <= k <= n_frames],
