@@ -265,15 +265,10 @@ def _route_on(graph: _Graph, local: FloatArray, rc: list[tuple[int, int]], move_
     for i in range(len(local) - 1):
         chain, last = graph.solve(rc[i], headings, rc[i + 1], reach_px=float(move_px))
         if chain is None and i > 0:
-            free, _ = graph.solve(rc[i], np.arange(N_HEADINGS), rc[i + 1], float(move_px))
-            if free is not None:  # reachable only by turning back at the waypoint
-                near = local[i] + np.asarray(origin, float)
-                raise TraceError(
-                    f"view {view}: the trace doubles back at click {i + 1} "
-                    f"({near[0]:.0f}, {near[1]:.0f}): click {i + 2} lies back along the "
-                    f"vessel; put the clicks in order along the vessel",
-                    view=view, near_px=near,
-                )
+            # Reachable only by turning at the waypoint: a vessel that folds back in
+            # projection (foreshortened) turns there too, so the turn is allowed; clicks
+            # out of order show as a route that runs back over itself (checked below).
+            chain, _ = graph.solve(rc[i], np.arange(N_HEADINGS), rc[i + 1], float(move_px))
         if chain is None:
             near = np.array([graph.cols[last], graph.rows[last]], float) + origin
             raise TraceError(
@@ -294,7 +289,8 @@ def _route_on(graph: _Graph, local: FloatArray, rc: list[tuple[int, int]], move_
             raise TraceError(
                 f"view {view}: the trace doubles back at click {i + 1} "
                 f"({near[0]:.0f}, {near[1]:.0f}): click {i + 2} lies back along the "
-                f"vessel; put the clicks in order along the vessel",
+                f"vessel; put the clicks in order along the vessel (if they are, the "
+                f"vessel folds back on itself in this view: choose another view)",
                 view=view, near_px=near,
             )
         pieces.extend(new)

@@ -98,6 +98,7 @@ class ViewerApp:
             if seeds_path is None and demo["seeds"].is_file():
                 seeds_path = str(demo["seeds"])
         self._lock = threading.RLock()
+        self.intensity = {"a": "auto", "b": "auto"}  # ReconstructionOptions.intensity_a/b
         self._autosave_arg = autosave_path
         self.notifications: list[tuple[str, str, str]] = []  # (level, title, body)
         self.last_click_ms: float = float("nan")
@@ -248,6 +249,15 @@ class ViewerApp:
             scene.update_image(v)
             self.panels.show_info(self.views)
         threading.Thread(target=self._warm_vesselness, args=(v,), daemon=True).start()
+
+    def set_intensity(self, view: str, choice: str) -> None:
+        """How view ``view``'s stored values are read by the next Reconstruct (lin/log/auto)."""
+        from recon.intensity import INTENSITY_CHOICES
+
+        if choice not in INTENSITY_CHOICES:
+            raise ValueError(f"intensity must be one of {', '.join(INTENSITY_CHOICES)}")
+        with self._lock:
+            self.intensity[view] = choice
 
     def set_window(self, view: str, level: float, width: float) -> None:
         with self._lock:
@@ -449,7 +459,13 @@ class ViewerApp:
             with self._lock:
                 seeds, segment = self._seeds_for_run()
                 view_a, view_b = self.views["a"], self.views["b"]
-            options = ReconstructionOptions(matcher="match3", optimizer="palm", segment=segment)
+            options = ReconstructionOptions(
+                matcher="match3",
+                optimizer="palm",
+                segment=segment,
+                intensity_a=self.intensity["a"],
+                intensity_b=self.intensity["b"],
+            )
             maps = (view_a.get_vesselness(), view_b.get_vesselness())  # cached for snapping
             rec = reconstruct_pair(view_a.angio, view_b.angio, seeds, options,
                                    progress=progress, vesselness=maps)

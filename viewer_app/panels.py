@@ -22,6 +22,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import viser
 
+from recon.intensity import INTENSITY_CHOICES
 from recon.io import MESH_FORMATS
 from viewer_app.plot import profile_plot
 from viewer_app.results import (
@@ -81,6 +82,7 @@ class ViewControls:
     upload: viser.GuiUploadButtonHandle
     level: viser.GuiSliderHandle
     width: viser.GuiSliderHandle
+    intensity: viser.GuiDropdownHandle  # how stored values relate to attenuation
 
 
 @dataclass(frozen=True)
@@ -240,9 +242,17 @@ def _case_panel(gui: viser.GuiApi, app: ViewerApp, refreshing: Refreshing) -> Ca
         uploads = {key: _upload_button(gui, app, key) for key in VIEW_KEYS}
     with gui.add_folder("Window / level", expand_by_default=False):
         windows = {key: _window_sliders(gui, app, refreshing, key) for key in VIEW_KEYS}
+    with gui.add_folder("Stored values", expand_by_default=False):
+        gui.add_markdown(
+            "How each file's pixel values relate to the X-ray attenuation, for the radius "
+            "fit: *lin* (linear in intensity), *log* (linear in attenuation) or *auto* "
+            "(the file's tag, else estimated; the report says which and why)."
+        )
+        intensities = {key: _intensity_dropdown(gui, app, key) for key in VIEW_KEYS}
     views = {
         key: ViewControls(frame=frames[key], path=paths[key], upload=uploads[key],
-                          level=windows[key][0], width=windows[key][1])
+                          level=windows[key][0], width=windows[key][1],
+                          intensity=intensities[key])
         for key in VIEW_KEYS
     }
     return CasePanel(info=info, open_files=open_files, views=views)
@@ -287,6 +297,17 @@ def _window_sliders(
     level.on_update(window_changed)
     width.on_update(window_changed)
     return level, width
+
+
+def _intensity_dropdown(gui: viser.GuiApi, app: ViewerApp, key: str) -> viser.GuiDropdownHandle:
+    dropdown = gui.add_dropdown(f"Values {key.upper()}", list(INTENSITY_CHOICES),
+                                initial_value="auto")
+
+    @dropdown.on_update
+    def _(event: viser.GuiEvent) -> None:
+        app.set_intensity(key, str(dropdown.value))
+
+    return dropdown
 
 
 def _marks_panel(gui: viser.GuiApi, app: ViewerApp, refreshing: Refreshing) -> MarksPanel:

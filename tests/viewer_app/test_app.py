@@ -5,10 +5,12 @@ from __future__ import annotations
 import io
 import json
 import threading
+import time
 import urllib.request
 from pathlib import Path
 
 import numpy as np
+import pytest
 import trimesh
 
 from recon.io import load_seeds
@@ -220,3 +222,17 @@ def test_cine_frame_slider_and_missing_geometry(tmp_path: Path) -> None:
         assert app.views["a"].angio.path.endswith("IM7.dcm")
     finally:
         app.stop()
+
+
+def test_the_intensity_choice_of_each_view_reaches_the_reconstruction(app: ViewerApp) -> None:
+    app.panels.case.views["b"].intensity.value = "log"  # the panel's dropdown
+    deadline = time.monotonic() + 5.0
+    while app.intensity["b"] != "log" and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert app.intensity == {"a": "auto", "b": "log"}
+    with pytest.raises(ValueError):
+        app.set_intensity("a", "gamma")
+    rec = app.reconstruct()
+    assert rec.options.intensity_a == "auto" and rec.options.intensity_b == "log"
+    report = rec.report()["intensity"]
+    assert report["b"]["mapping"] == "log" and "set by the user" in report["b"]["reason"]
