@@ -130,6 +130,15 @@ def build_parser() -> argparse.ArgumentParser:
         "and refine over the matched points (off by default: it did not improve the pose "
         "on the phantom benchmark)",
     )
+    for view in ("a", "b"):
+        p.add_argument(
+            f"--intensity-{view}",
+            choices=("auto", "lin", "log"),
+            default="auto",
+            help=f"how file {view.upper()}'s stored values relate to attenuation: lin (linear in "
+            "X-ray intensity), log (linear in attenuation) or auto (its "
+            "PixelIntensityRelationship tag when LIN/LOG, else estimated); default auto",
+        )
     p.add_argument("--quiet", action="store_true", help="no progress on stderr")
     _add_geometry_options(p)
 
@@ -153,8 +162,29 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("name", choices=BENCHES)
     p.add_argument("--json", metavar="PATH", help="write the result here")
-    p.add_argument("--cases", type=int, help="number of cases (per geometry for calibration)")
+    p.add_argument(
+        "--cases",
+        type=int,
+        help="number of cases (per geometry for calibration, per imaging chain for "
+        "--suite varied)",
+    )
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument(
+        "--suite",
+        choices=("regular", "varied"),
+        default="regular",
+        help="regular: the plain phantom (default); varied: every imaging chain (detector, "
+        "mapping, blur, glare, noise, background, bit depth) x harder anatomy (centerline "
+        "and reconstruct only)",
+    )
+    p.add_argument(
+        "--jitter",
+        type=int,
+        default=0,
+        metavar="N",
+        help="reconstruct only: N more runs per case with every click moved up to 2 px; "
+        "reports the spread of MLD, %%DS and the MLD site",
+    )
     return parser
 
 
@@ -249,9 +279,13 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
         optimizer=args.optimizer,
         segment=args.segment,
         self_calibration=args.self_calibration,
+        intensity_a=args.intensity_a,
+        intensity_b=args.intensity_b,
     )
     rec = reconstruct_pair(angio_a, angio_b, seeds, options, progress=progress)
     written = write_outputs(rec, Path(args.out), formats=formats)
+    for line in rec.warnings:  # shown even with --quiet: they qualify the numbers
+        print(f"coronary3d: warning: {line}", file=sys.stderr)
     if not args.quiet:
         m = rec.measurements
         print(
@@ -291,7 +325,20 @@ def cmd_bench(args: argparse.Namespace) -> int:
     import importlib
 
     module = importlib.import_module(f"recon.bench.{args.name}")
-    result = module.run(cases=args.cases, seed=args.seed)
+    extra = {}
+    if args.name in ("centerline", "reconstruct"):
+        extra["suite"] = args.suite
+    elif args.suite != "regular":
+        print(f"coronary3d: error: bench {args.name} has no --suite {args.suite} "
+              "(centerline and reconstruct have)", file=sys.stderr)
+        return EXIT_USER_ERROR
+    if args.jitter:
+        if args.name != "reconstruct" or args.jitter < 0:
+            print("coronary3d: error: --jitter N (N >= 1) is for bench reconstruct",
+                  file=sys.stderr)
+            return EXIT_USER_ERROR
+        extra["jitter"] = args.jitter
+    result = module.run(cases=args.cases, seed=args.seed, **extra)
     print(module.format_table(result))
     if args.json:
         from recon.io.files import atomic_write_bytes

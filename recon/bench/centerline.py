@@ -15,6 +15,20 @@ and compared with the true projected main vessel:
 - trace_ms: time of :func:`trace_segment` for the segment, given the vesselness.
 
 Summary figures are medians over cases and both views.
+
+``suite="varied"`` (:func:`recon.synth.suites.varied_cases`: every imaging
+chain x harder anatomy) reports per chain and overall, with each image
+passed as the chain's file would be (its PixelIntensityRelationship tag and
+the pixel size at the isocenter):
+
+- trace_success: the fraction of traces with no stretch of the projected
+  true segment more than :data:`SUCCESS_PX` from the trace (the first and
+  last 3 px of the truth left out: the clicked ends carry click noise); a
+  trace the tool refuses (TraceError) counts as a failure, not as skipped;
+- centerline_rms_px, radius_mae_px: as above, medians over the traces the
+  tool returned;
+- radius_bias_pct: median over those traces of the mean signed
+  100 (fitted - true) / true radius, without the first and last 3 px.
 """
 
 from __future__ import annotations
@@ -24,17 +38,27 @@ import time
 import numpy as np
 from scipy.spatial import cKDTree
 
-from recon.bench.common import PRESET_CYCLE
+from recon.bench.common import (
+    PRESET_CYCLE,
+    VARIED_CASES_PER_CHAIN,
+    check_suite,
+    median,
+    parallel_map,
+    percentile,
+    pixel_mm_at_isocenter,
+)
 from recon.centerline import compute_vesselness, trace_segment
 from recon.geometry import ViewGeometry
 from recon.synth import make_phantom
 from recon.types import arclength
 
-__all__ = ["run", "format_table", "PRESET_CYCLE", "END_EXCLUSION_PX", "CASES"]
+__all__ = ["run", "format_table", "PRESET_CYCLE", "END_EXCLUSION_PX", "CASES", "SUCCESS_PX"]
 
 CASES = 10  # phantom cases when run(cases=None)
 #: Arc length (px) left out of the radius error at both ends of each trace.
 END_EXCLUSION_PX = 3.0
+#: A trace succeeds when no point of the projected true segment is farther than this (px).
+SUCCESS_PX = 2.0
 
 
 def _dense_truth(
@@ -78,21 +102,29 @@ def _evaluate_view(
     }
 
 
-def run(cases: int | None = None, seed: int = 0) -> dict:
+def run(cases: int | None = None, seed: int = 0, suite: str = "regular") -> dict:
     """Trace the phantom segment in both views of ``cases`` cases.
 
     Parameters
     ----------
     cases : number of phantom cases (None: :data:`CASES`); presets cycle
-        through :data:`PRESET_CYCLE`.
+        through :data:`PRESET_CYCLE`. For the varied suite: cases per chain
+        (None: 8).
     seed : seed of the first case (case k uses seed + k).
+    suite : "regular" (the plain phantom) or "varied" (imaging chains x
+        harder anatomy; see the module docstring).
 
     Returns
     -------
     dict with "cases", the medians "centerline_rms_px", "radius_mae_px",
     "vesselness_ms", "trace_ms" (over cases and both views), "rows" (one per
-    case and view), "failures" (traces that raised) and "notes".
+    case and view), "failures" (traces that raised) and "notes". The varied
+    suite's dict has "suite", "chains" {name: figures}, "overall" (the same
+    figures over all traces), "rows" and "failures".
     """
+    check_suite(suite)
+    if suite == "varied":
+        return _run_varied(VARIED_CASES_PER_CHAIN if cases is None else cases, seed)
     cases = CASES if cases is None else cases
     rows: list[dict] = []
     failures: list[dict] = []
@@ -138,6 +170,8 @@ def run(cases: int | None = None, seed: int = 0) -> dict:
 
 def format_table(result: dict) -> str:
     """Plain-text table of a :func:`run` result: one line per trace, then the medians."""
+    if result.get("suite") == "varied":
+        return _format_varied(result)
     head = (f"{'preset':<8}{'seed':>5}{'view':>5}{'len px':>8}{'rms px':>8}{'max px':>8}"
             f"{'r MAE':>7}{'r bias':>8}{'r px':>6}{'vess ms':>9}{'trace ms':>9}")
     lines = ["centerline benchmark: traced vs true projected centerline", head,
@@ -158,4 +192,171 @@ def format_table(result: dict) -> str:
         ok = "ok" if result[key] <= t[key] else "MISSED"
         lines.append(f"median {key:<18} {result[key]:8.3f} {unit}  (target <= {t[key]:g}: {ok})")
     lines.append(f"{result['traces']} traces from {result['cases']} cases; {result['notes']}")
+    return "\n".join(lines)
+
+
+# ------------------------------------------------------------------ varied suite
+def _supported(fn, **kwargs) -> dict:
+    """The keyword arguments ``fn`` accepts (the tracing's options grow over time)."""
+    import inspect
+
+    params = inspect.signature(fn).parameters
+    return {k: v for k, v in kwargs.items() if k in params and v is not None}
+
+
+def _evaluate_varied_view(image: np.ndarray, view: ViewGeometry, clicks_px: np.ndarray,
+                          case, name: str) -> dict:
+    """One trace of the varied suite against the truth; raises what the tracing raises."""
+    tag = case.chain.tag if case.chain is not None else None
+    pixel_mm = pixel_mm_at_isocenter(view)
+    t0 = time.perf_counter()
+    vmap = compute_vesselness(image, **_supported(compute_vesselness, pixel_mm=pixel_mm))
+    t1 = time.perf_counter()
+    cl = trace_segment(image, clicks_px, vesselness=vmap, view=name,
+                       **_supported(trace_segment, pixel_mm=pixel_mm, relationship=tag))
+    t2 = time.perf_counter()
+    main_X, main_r = case.truth.vessels[0]
+    dense, radius_true = _dense_truth(view, main_X, main_r)
+    dist, nearest = cKDTree(dense).query(cl.points_px)
+    s = cl.arclength_px
+    inner = (s >= END_EXCLUSION_PX) & (s <= s[-1] - END_EXCLUSION_PX)
+    r_true = radius_true[nearest[inner]]
+    err_r = cl.radius_px[inner] - r_true
+    # Coverage of the true segment: its distance to the trace (densified to 0.1 px).
+    seg, _ = _dense_truth(view, case.truth.segment_X_world, case.truth.segment_radius_mm, 0.1)
+    seg_s = arclength(seg)
+    seg_in = (seg_s >= END_EXCLUSION_PX) & (seg_s <= seg_s[-1] - END_EXCLUSION_PX)
+    trace_dense, _ = _dense_polyline(cl.points_px, 0.1)
+    gap, _ = cKDTree(trace_dense).query(seg[seg_in])
+    far = gap > SUCCESS_PX
+    return {
+        "status": "lost" if np.any(far) else "ok",
+        "success": bool(not np.any(far)),
+        "n_points": int(len(cl.points_px)),
+        "length_px": float(cl.length_px),
+        "truth_length_px": float(seg_s[-1]),
+        "truth_max_gap_px": float(gap.max()) if len(gap) else 0.0,
+        "lost_px": float(np.sum(far) * 0.1),
+        "centerline_rms_px": float(np.sqrt(np.mean(dist**2))),
+        "centerline_max_px": float(dist.max()),
+        "radius_mae_px": float(np.mean(np.abs(err_r))) if len(err_r) else float("nan"),
+        "radius_bias_px": float(np.mean(err_r)) if len(err_r) else float("nan"),
+        "radius_bias_pct": float(100.0 * np.mean(err_r / r_true)) if len(err_r) else float("nan"),
+        "radius_true_median_px": float(np.median(radius_true[nearest])),
+        "intensity_mapping": getattr(cl, "intensity_mapping", None),
+        "vesselness_ms": 1e3 * (t1 - t0),
+        "trace_ms": 1e3 * (t2 - t1),
+    }
+
+
+def _dense_polyline(points: np.ndarray, step: float) -> tuple[np.ndarray, np.ndarray]:
+    s = arclength(points)
+    s_new = np.arange(0.0, s[-1] + 1e-9, step)
+    return np.column_stack([np.interp(s_new, s, points[:, k]) for k in range(2)]), s_new
+
+
+def _varied_case_rows(spec) -> list[dict]:
+    """Both views' rows of one varied-suite case (module level: runs in a worker)."""
+    from recon.synth.suites import make_suite_case
+
+    case = make_suite_case(spec)
+    segment = case.seeds.segments[0]
+    rows = []
+    for name, image, view, clicks in (
+        ("A", case.image_a, case.view_a, segment.a),
+        ("B", case.image_b, case.view_b_true, segment.b),
+    ):
+        base = {"chain": spec.chain, "preset": spec.preset_name, "seed": spec.seed,
+                "anatomy": spec.anatomy, "view": name, "size_px": int(view.cols),
+                "pixel_spacing_mm": float(view.pixel_spacing_mm[0])}
+        try:
+            row = _evaluate_varied_view(image, view, clicks, case, name)
+        except ValueError as err:  # TraceError (a CoronaryError) included: a failure
+            row = {"status": "refused", "success": False, "error": " ".join(str(err).split())}
+        rows.append({**base, **row})
+    return rows
+
+
+def _figures(rows: list[dict]) -> dict:
+    """The per-chain (or overall) figures of a set of varied-suite trace rows."""
+    done = [r for r in rows if r["status"] != "refused"]
+    return {
+        "cases": len({(r["chain"], r["preset"], r["seed"]) for r in rows}),
+        "traces": len(rows),
+        "trace_success": float(np.mean([r["success"] for r in rows])) if rows else float("nan"),
+        "refused": sum(r["status"] == "refused" for r in rows),
+        "lost": sum(r["status"] == "lost" for r in rows),
+        "centerline_rms_px": median(r["centerline_rms_px"] for r in done),
+        "centerline_rms_px_p90": percentile([r["centerline_rms_px"] for r in done], 90),
+        "radius_bias_pct": median(r["radius_bias_pct"] for r in done),
+        "radius_mae_px": median(r["radius_mae_px"] for r in done),
+        "vesselness_ms": median(r["vesselness_ms"] for r in done),
+        "trace_ms": median(r["trace_ms"] for r in done),
+    }
+
+
+def _run_varied(per_chain: int, seed: int) -> dict:
+    from recon.synth.suites import varied_cases
+
+    specs = varied_cases(per_chain, seed)
+    t0 = time.perf_counter()
+    rows = [r for case_rows in parallel_map(_varied_case_rows, specs) for r in case_rows]
+    chains: dict[str, dict] = {}
+    for name in dict.fromkeys(spec.chain for spec in specs):
+        chains[name] = _figures([r for r in rows if r["chain"] == name])
+    anatomy = {a: _figures([r for r in rows if r["anatomy"] == a])
+               for a in dict.fromkeys(spec.anatomy for spec in specs)}
+    return {
+        "suite": "varied",
+        "cases": len(specs),
+        "cases_per_chain": int(per_chain),
+        "seed": int(seed),
+        "chains": chains,
+        "overall": _figures(rows),
+        "anatomy": anatomy,
+        "targets": {"trace_success": 0.98, "centerline_rms_px": 0.3, "abs_radius_bias_pct": 2.0},
+        "rows": rows,
+        "failures": [r for r in rows if not r["success"]],
+        "wall_s": time.perf_counter() - t0,
+        "notes": (
+            f"trace success: no point of the projected true segment more than {SUCCESS_PX:g} "
+            f"px from the trace (first and last {END_EXCLUSION_PX:g} px of the truth left out);"
+            " a refused trace (TraceError) is a failure; rms, radius: medians over the traces "
+            "returned; radius_bias_pct: median of each trace's mean signed "
+            "100 (fitted - true) / true"
+        ),
+    }
+
+
+def _format_varied(result: dict) -> str:
+    head = (f"{'chain':<22}{'cases':>6}{'traces':>7}{'success':>9}{'refused':>8}{'lost':>6}"
+            f"{'rms px':>8}{'p90 px':>8}{'r bias %':>9}{'r MAE px':>9}{'trace ms':>9}")
+    lines = [f"centerline benchmark, varied suite ({result['cases_per_chain']} cases per chain, "
+             f"seed {result['seed']})", head, "-" * len(head)]
+
+    def line(name: str, f: dict) -> str:
+        return (f"{name:<22}{f['cases']:>6}{f['traces']:>7}{f['trace_success']:>9.3f}"
+                f"{f['refused']:>8}{f['lost']:>6}{f['centerline_rms_px']:>8.3f}"
+                f"{f['centerline_rms_px_p90']:>8.3f}{f['radius_bias_pct']:>+9.2f}"
+                f"{f['radius_mae_px']:>9.3f}{f['trace_ms']:>9.0f}")
+
+    for name, f in result["chains"].items():
+        lines.append(line(name, f))
+    lines.append("-" * len(head))
+    lines.append(line("overall", result["overall"]))
+    lines.append("")
+    lines.append("by anatomy")
+    for name, f in result["anatomy"].items():
+        lines.append(line(name, f))
+    lines.append("")
+    for r in result["failures"]:
+        what = r.get("error") or (f"lost {r['lost_px']:.0f} px of the truth "
+                                  f"(max gap {r['truth_max_gap_px']:.1f} px)")
+        lines.append(f"FAILED {r['chain']} {r['preset']}/{r['seed']} {r['anatomy']} "
+                     f"view {r['view']}: {what}")
+    t = result["targets"]
+    lines.append(f"targets: trace success >= {t['trace_success']}, rms <= "
+                 f"{t['centerline_rms_px']} px, |radius bias| <= {t['abs_radius_bias_pct']} % "
+                 "per chain")
+    lines.append(f"{result['notes']}; {result['wall_s']:.0f} s wall")
     return "\n".join(lines)

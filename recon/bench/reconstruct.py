@@ -6,6 +6,22 @@ images, the header geometry and the noisy clicks, and its results are
 compared with the truth: 3D centerline error, MLD, % diameter stenosis,
 segment length, mesh volume, and the true-pose error of calibrated view B
 (:func:`recon.bench.common.pose_error`).
+
+``suite="varied"`` (:func:`recon.synth.suites.varied_cases`: every imaging
+chain x harder anatomy; each image passed as an in-memory angiogram with
+the chain's PixelIntensityRelationship tag and bits stored) reports the
+same end-to-end figures per chain and overall: median and 90th percentile
+|MLD error|, median |length error| and |mesh volume error|, the 3D
+centerline RMS after a rigid (rotation + translation, not scaled)
+alignment to the truth (median and max), and the failed cases with their
+one-line reason.
+
+``jitter=N`` adds click stability: per case, N more runs with every click
+moved uniformly within a disc of :data:`JITTER_PX`; the spread (max - min
+over the N runs) of the MLD, the %DS and the MLD site (mm along the 3D
+centerline), and the fraction of cases with an MLD spread of at most
+:data:`STABLE_MLD_SPREAD_MM` and a site spread of at most
+:data:`STABLE_SITE_SPREAD_MM` (a case with a failed run is not stable).
 """
 
 from __future__ import annotations
@@ -15,7 +31,18 @@ import time
 import numpy as np
 from scipy.spatial import cKDTree
 
-from recon.bench.common import PRESET_CYCLE, pose_error
+from recon.bench.common import (
+    PRESET_CYCLE,
+    VARIED_CASES_PER_CHAIN,
+    case_angiogram,
+    check_suite,
+    jitter_seeds,
+    median,
+    parallel_map,
+    percentile,
+    pose_error,
+    rigid_rms_mm,
+)
 from recon.geometry import ViewGeometry
 from recon.pipeline import ReconstructionOptions, reconstruct_pair
 from recon.synth import PhantomCase, make_phantom
@@ -24,6 +51,10 @@ from recon.types import Angiogram
 CASES = 8  # phantom cases when run(cases=None)
 STENOSIS_PCT = 50.0  # diameter stenosis of every case
 SELF_CALIBRATION = False  # ReconstructionOptions.self_calibration of the runs
+JITTER_PX = 2.0  # click stability: every click moves up to this far (uniform in a disc)
+STABLE_MLD_SPREAD_MM = 0.1
+STABLE_SITE_SPREAD_MM = 2.0
+RIGID_RMS_LIMIT_MM = 0.6  # the target: no case above this after a rigid alignment
 
 
 def _angiogram(image: np.ndarray, view: ViewGeometry, name: str) -> Angiogram:
@@ -69,12 +100,42 @@ def scale_free_rms_mm(X_world: np.ndarray, truth_dense: np.ndarray, source_a: np
     return float(res.fun), float(res.x)
 
 
-def evaluate_case(case: PhantomCase, options: ReconstructionOptions) -> dict:
-    a = _angiogram(case.image_a, case.view_a, f"{case.preset}-{case.seed}-a")
-    b = _angiogram(case.image_b, case.view_b_nominal, f"{case.preset}-{case.seed}-b")
+def case_angiograms(case: PhantomCase) -> tuple[Angiogram, Angiogram]:
+    """View A (true = header geometry) and view B (header geometry) as angiograms.
+
+    A chain's case carries its tag and bits stored in ``info`` (see
+    :func:`recon.bench.common.case_angiogram`); a plain case has none.
+    """
+    if case.chain is None:
+        return (_angiogram(case.image_a, case.view_a, f"{case.preset}-{case.seed}-a"),
+                _angiogram(case.image_b, case.view_b_nominal, f"{case.preset}-{case.seed}-b"))
+    return (case_angiogram(case.image_a, case.view_a, f"{case.preset}-{case.seed}-a", case.chain),
+            case_angiogram(case.image_b, case.view_b_nominal, f"{case.preset}-{case.seed}-b",
+                           case.chain))
+
+
+def evaluate_case(case: PhantomCase, options: ReconstructionOptions, *,
+                  rigid: bool = False) -> dict:
+    """One case's end-to-end figures (``rigid``: also the RMS after a rigid alignment)."""
+    a, b = case_angiograms(case)
     t0 = time.perf_counter()
     rec = reconstruct_pair(a, b, case.seeds, options)
     wall_ms = (time.perf_counter() - t0) * 1000.0
+    row = _case_row(case, rec, wall_ms)
+    if rigid:
+        row["centerline_3d_rms_rigid_mm"] = rigid_rms_mm(rec.centerline_3d.X_world,
+                                                         case.truth.segment_X_world)
+        row["mld_s_mm"] = float(rec.measurements.mld_s_mm)
+        consistency = getattr(rec, "consistency", None)
+        row["consistency_ok"] = None if consistency is None else bool(consistency.ok)
+        row["flagged_stretches"] = 0 if consistency is None else len(consistency.stretches)
+        row["warnings"] = list(getattr(rec, "warnings", ()))
+        row["mappings"] = [getattr(rec.centerline_a, "intensity_mapping", None),
+                           getattr(rec.centerline_b, "intensity_mapping", None)]
+    return row
+
+
+def _case_row(case: PhantomCase, rec, wall_ms: float) -> dict:
     truth = case.truth
     err = polyline_distance_mm(rec.centerline_3d.X_world, truth.segment_X_world)
     m = rec.measurements
@@ -119,12 +180,32 @@ def evaluate_case(case: PhantomCase, options: ReconstructionOptions) -> dict:
     }
 
 
-def run(cases: int | None = None, seed: int = 0) -> dict:
+def run(cases: int | None = None, seed: int = 0, suite: str = "regular",
+        jitter: int = 0) -> dict:
     """Run the end-to-end benchmark on ``cases`` phantom cases; medians and rows.
 
     ``cases`` None means :data:`CASES`; case k is preset ``PRESET_CYCLE[k % 4]``
-    with seed ``seed + k``.
+    with seed ``seed + k``. ``suite="varied"``: ``cases`` per imaging chain
+    (None: 8), figures per chain and overall (module docstring). ``jitter``:
+    that many extra runs per case with jittered clicks, reported under
+    "stability".
     """
+    check_suite(suite)
+    if jitter < 0:
+        raise ValueError(f"jitter must be >= 0, got {jitter}")
+    if suite == "varied":
+        return _run_varied(VARIED_CASES_PER_CHAIN if cases is None else cases, seed, jitter)
+    result = _run_regular(cases, seed)
+    if jitter:
+        cases = CASES if cases is None else cases
+        jobs = [(("regular", PRESET_CYCLE[k % len(PRESET_CYCLE)], seed + k), jitter)
+                for k in range(cases)]
+        result["stability"] = _stability_summary([o["stability"] for o in
+                                                  parallel_map(_case_job, jobs)])
+    return result
+
+
+def _run_regular(cases: int | None, seed: int) -> dict:
     cases = CASES if cases is None else cases
     stenosis_pct = STENOSIS_PCT
     self_calibration = SELF_CALIBRATION
@@ -174,6 +255,9 @@ def run(cases: int | None = None, seed: int = 0) -> dict:
 
 
 def format_table(result: dict) -> str:
+    """Plain-text table of a :func:`run` result."""
+    if result.get("suite") == "varied":
+        return _format_varied(result)
     lines = [
         f"End-to-end reconstruction on {result['cases']} phantom cases "
         f"(self-calibration {'on' if result['self_calibration'] else 'off'})",
@@ -210,4 +294,235 @@ def format_table(result: dict) -> str:
         + ", ".join(f"{k} {v:.0f}" for k, v in result["median_stage_ms"].items()),
         f"failed cases                    {len(result.get('failures', []))}",
     ]
+    if result.get("stability"):
+        lines += _format_stability(result["stability"])
     return "\n".join(lines)
+
+
+# ------------------------------------------------------------------ varied suite
+def _make(which) -> tuple[PhantomCase, dict]:
+    """The case of a job and the keys that name it in the rows."""
+    if which[0] == "regular":
+        _, preset, case_seed = which
+        case = make_phantom(preset, case_seed, stenosis_pct=STENOSIS_PCT)
+        return case, {"chain": "regular", "preset": preset, "seed": case_seed,
+                      "anatomy": "plain"}
+    from recon.synth.suites import make_suite_case
+
+    spec = which[1]
+    case = make_suite_case(spec, stenosis_pct=STENOSIS_PCT)
+    return case, {"chain": spec.chain, "preset": spec.preset_name, "seed": spec.seed,
+                  "anatomy": spec.anatomy}
+
+
+def _one_line(err: BaseException) -> str:
+    return f"{type(err).__name__}: " + " ".join(str(err).split())
+
+
+def _case_job(job) -> dict:
+    """One case: the base run and ``jitter`` runs with jittered clicks (runs in a worker)."""
+    which, jitter = job
+    options = ReconstructionOptions(self_calibration=SELF_CALIBRATION)
+    case, key = _make(which)
+    out: dict = {"key": key, "row": None, "failure": None, "stability": None}
+    try:
+        out["row"] = {**key, **evaluate_case(case, options, rigid=True)}
+    except ValueError as err:  # CoronaryError included: a failed case is a result
+        out["failure"] = {**key, "error": _one_line(err)}
+    if jitter:
+        out["stability"] = {**key, **_jitter_case(case, options, jitter, out["row"])}
+    return out
+
+
+def _jitter_case(case: PhantomCase, options: ReconstructionOptions, n: int,
+                 base: dict | None) -> dict:
+    """Spreads of MLD, %DS and MLD site over ``n`` runs with every click jittered."""
+    a, b = case_angiograms(case)
+    rng = np.random.default_rng([case.seed, 7919, n])
+    mld, ds, site, errors = [], [], [], []
+    for _ in range(n):
+        seeds = jitter_seeds(case.seeds, rng, JITTER_PX, a.shape, b.shape)
+        try:
+            m = reconstruct_pair(a, b, seeds, options).measurements
+        except ValueError as err:
+            errors.append(_one_line(err))
+            continue
+        mld.append(m.mld_mm)
+        ds.append(m.diameter_stenosis_pct)
+        site.append(m.mld_s_mm)
+
+    def spread(v: list[float]) -> float:
+        return float(np.ptp(v)) if v else float("nan")
+
+    out = {
+        "runs": len(mld),
+        "failed_runs": len(errors),
+        "errors": errors[:3],
+        "base_failed": base is None,
+        "mld_spread_mm": spread(mld),
+        "ds_spread_pct": spread(ds),
+        "site_spread_mm": spread(site),
+        "mld_mm": [float(x) for x in mld],
+        "ds_pct": [float(x) for x in ds],
+        "site_mm": [float(x) for x in site],
+    }
+    all_ran = not errors and bool(mld)
+    out["mld_stable"] = bool(all_ran and out["mld_spread_mm"] <= STABLE_MLD_SPREAD_MM)
+    out["site_stable"] = bool(all_ran and out["site_spread_mm"] <= STABLE_SITE_SPREAD_MM)
+    out["stable"] = out["mld_stable"] and out["site_stable"]
+    return out
+
+
+def _stability_figures(cases: list[dict]) -> dict:
+    return {
+        "cases": len(cases),
+        "stable_fraction": float(np.mean([c["stable"] for c in cases])) if cases else float("nan"),
+        "mld_within_fraction": float(np.mean([c["mld_stable"] for c in cases])) if cases
+        else float("nan"),
+        "site_within_fraction": float(np.mean([c["site_stable"] for c in cases])) if cases
+        else float("nan"),
+        "cases_with_failed_runs": sum(c["failed_runs"] > 0 or c["runs"] == 0 for c in cases),
+        "mld_spread_mm_median": median(c["mld_spread_mm"] for c in cases),
+        "mld_spread_mm_max": percentile([c["mld_spread_mm"] for c in cases], 100),
+        "ds_spread_pct_median": median(c["ds_spread_pct"] for c in cases),
+        "ds_spread_pct_max": percentile([c["ds_spread_pct"] for c in cases], 100),
+        "site_spread_mm_median": median(c["site_spread_mm"] for c in cases),
+        "site_spread_mm_max": percentile([c["site_spread_mm"] for c in cases], 100),
+    }
+
+
+def _stability_summary(cases: list[dict]) -> dict:
+    chains = {name: _stability_figures([c for c in cases if c["chain"] == name])
+              for name in dict.fromkeys(c["chain"] for c in cases)}
+    runs = max((c["runs"] + c["failed_runs"] for c in cases), default=0)
+    return {
+        "jitter_runs": runs,
+        "jitter_px": JITTER_PX,
+        "criteria": {"mld_spread_mm": STABLE_MLD_SPREAD_MM,
+                     "site_spread_mm": STABLE_SITE_SPREAD_MM},
+        "target_stable_fraction": 0.9,
+        "overall": _stability_figures(cases),
+        "chains": chains,
+        "cases": cases,
+    }
+
+
+def _figures(rows: list[dict], failures: list[dict]) -> dict:
+    """End-to-end figures of a set of varied-suite cases (rows ran, failures did not)."""
+    def col(key: str, absolute: bool = True) -> list[float]:
+        return [abs(r[key]) if absolute else r[key] for r in rows]
+
+    rigid = col("centerline_3d_rms_rigid_mm")
+    return {
+        "cases": len(rows) + len(failures),
+        "succeeded": len(rows),
+        "failed": len(failures),
+        "abs_mld_error_mm": median(col("mld_error_mm")),
+        "p90_abs_mld_error_mm": percentile(col("mld_error_mm"), 90),
+        "max_abs_mld_error_mm": percentile(col("mld_error_mm"), 100),
+        "abs_diameter_stenosis_error_pct": median(col("diameter_stenosis_error_pct")),
+        "abs_length_error_pct": median(col("length_error_pct")),
+        "abs_volume_error_pct": median(col("volume_error_pct")),
+        "centerline_3d_rms_rigid_mm": median(rigid),
+        "max_centerline_3d_rms_rigid_mm": percentile(rigid, 100),
+        "cases_above_rigid_limit": sum(x > RIGID_RMS_LIMIT_MM for x in rigid),
+        "centerline_3d_rms_mm": median(col("centerline_3d_rms_mm")),
+        "centerline_3d_rms_scale_free_mm": median(col("centerline_3d_rms_scale_free_mm")),
+        "watertight_rate": float(np.mean([r["watertight"] for r in rows])) if rows
+        else float("nan"),
+        "pose_improved_rate": float(np.mean([r["pose_displacement_mm_after"]
+                                             < r["pose_displacement_mm_before"] for r in rows]))
+        if rows else float("nan"),
+        "median_pipeline_ms": median(col("wall_ms")),
+        "flagged_cases": sum(r.get("flagged_stretches", 0) > 0 for r in rows),
+        "failures": [{k: f[k] for k in ("preset", "seed", "anatomy", "error")} for f in failures],
+    }
+
+
+def _run_varied(per_chain: int, seed: int, jitter: int) -> dict:
+    from recon.synth.suites import varied_cases
+
+    specs = varied_cases(per_chain, seed)
+    t0 = time.perf_counter()
+    outs = parallel_map(_case_job, [(("varied", spec), jitter) for spec in specs])
+    rows = [o["row"] for o in outs if o["row"] is not None]
+    failures = [o["failure"] for o in outs if o["failure"] is not None]
+
+    def group(key: str) -> dict[str, dict]:
+        names = dict.fromkeys(o["key"][key] for o in outs)
+        return {n: _figures([r for r in rows if r[key] == n],
+                            [f for f in failures if f[key] == n]) for n in names}
+
+    result = {
+        "suite": "varied",
+        "cases": len(specs),
+        "cases_per_chain": int(per_chain),
+        "seed": int(seed),
+        "self_calibration": SELF_CALIBRATION,
+        "stenosis_pct": STENOSIS_PCT,
+        "chains": group("chain"),
+        "overall": _figures(rows, failures),
+        "anatomy": group("anatomy"),
+        "targets": {"abs_mld_error_mm": 0.08, "p90_abs_mld_error_mm": 0.2,
+                    "abs_length_error_pct": 1.0, "abs_volume_error_pct": 4.0,
+                    "max_centerline_3d_rms_rigid_mm": RIGID_RMS_LIMIT_MM},
+        "rows": rows,
+        "failures": failures,
+    }
+    if jitter:
+        result["stability"] = _stability_summary([o["stability"] for o in outs])
+    result["wall_s"] = time.perf_counter() - t0
+    return result
+
+
+def _format_varied(result: dict) -> str:
+    head = (f"{'':<22}{'cases':>6}{'fail':>5}{'|MLD| mm':>9}{'p90':>7}{'|%DS|':>7}"
+            f"{'|len| %':>8}{'|vol| %':>8}{'rigid mm':>9}{'max':>7}{'>0.6':>5}{'flag':>5}"
+            f"{'ms':>7}")
+    lines = [f"End-to-end reconstruction, varied suite ({result['cases_per_chain']} cases per "
+             f"chain, seed {result['seed']}; medians unless noted)", head, "-" * len(head)]
+
+    def line(name: str, f: dict) -> str:
+        return (f"{name:<22}{f['cases']:>6}{f['failed']:>5}{f['abs_mld_error_mm']:>9.3f}"
+                f"{f['p90_abs_mld_error_mm']:>7.3f}{f['abs_diameter_stenosis_error_pct']:>7.1f}"
+                f"{f['abs_length_error_pct']:>8.2f}{f['abs_volume_error_pct']:>8.1f}"
+                f"{f['centerline_3d_rms_rigid_mm']:>9.3f}"
+                f"{f['max_centerline_3d_rms_rigid_mm']:>7.2f}{f['cases_above_rigid_limit']:>5}"
+                f"{f['flagged_cases']:>5}{f['median_pipeline_ms']:>7.0f}")
+
+    for name, f in result["chains"].items():
+        lines.append(line(name, f))
+    lines.append("-" * len(head))
+    lines.append(line("overall", result["overall"]))
+    lines += ["", "by anatomy"]
+    lines += [line(name, f) for name, f in result["anatomy"].items()]
+    lines.append("")
+    for f in result["failures"]:
+        lines.append(f"FAILED {f['chain']} {f['preset']}/{f['seed']} {f['anatomy']}: {f['error']}")
+    if result.get("stability"):
+        lines += _format_stability(result["stability"])
+    t = result["targets"]
+    lines.append("")
+    lines.append(f"targets: |MLD| <= {t['abs_mld_error_mm']} mm (p90 <= "
+                 f"{t['p90_abs_mld_error_mm']}), |length| <= {t['abs_length_error_pct']} %, "
+                 f"|volume| <= {t['abs_volume_error_pct']} %, no case above "
+                 f"{t['max_centerline_3d_rms_rigid_mm']} mm rigid RMS; stability >= 0.9")
+    lines.append("fail: the run raised (counted, with its reason above); flag: ran, but the "
+                 "cross-view check listed stretches; rigid: 3D RMS after a rigid alignment")
+    lines.append(f"{result['wall_s']:.0f} s wall")
+    return "\n".join(lines)
+
+
+def _format_stability(st: dict) -> list[str]:
+    lines = ["", f"click stability: {st['jitter_runs']} runs per case, every click moved "
+             f"up to {st['jitter_px']:g} px (spreads: max - min; medians unless 'max')",
+             f"{'':<22}{'cases':>6}{'stable':>8}{'MLD<=0.1':>9}{'site<=2':>8}"
+             f"{'MLD spr':>8}{'max':>7}{'%DS spr':>8}{'site spr':>9}{'max':>7}{'fail':>5}"]
+    for name, f in [*st["chains"].items(), ("overall", st["overall"])]:
+        lines.append(
+            f"{name:<22}{f['cases']:>6}{f['stable_fraction']:>8.2f}"
+            f"{f['mld_within_fraction']:>9.2f}{f['site_within_fraction']:>8.2f}"
+            f"{f['mld_spread_mm_median']:>8.3f}{f['mld_spread_mm_max']:>7.2f}"
+            f"{f['ds_spread_pct_median']:>8.1f}{f['site_spread_mm_median']:>9.2f}"
+            f"{f['site_spread_mm_max']:>7.1f}{f['cases_with_failed_runs']:>5}")
+    return lines

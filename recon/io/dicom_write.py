@@ -45,6 +45,7 @@ def _xa_dataset(
     bits_stored: int,
     series_description: str,
     representative_frame: int | None,
+    pixel_intensity_relationship: str | None = None,
 ) -> Dataset:
     """Build the dataset written by :func:`write_xa_dicom` (see there)."""
     arr = np.asarray(frames)
@@ -118,6 +119,8 @@ def _xa_dataset(
     ds.HighBit = bits_stored - 1
     ds.PixelRepresentation = 0
     ds.LossyImageCompression = "00"
+    if pixel_intensity_relationship is not None:
+        ds.PixelIntensityRelationship = pixel_intensity_relationship
     if arr.ndim == 3:
         ds.NumberOfFrames = n_frames
         ds.FrameIncrementPointer = pydicom.tag.Tag("FrameTime")
@@ -143,6 +146,7 @@ def write_xa_dicom(
     bits_stored: int = 12,
     series_description: str = "",
     representative_frame: int | None = None,
+    pixel_intensity_relationship: str | None = None,
 ) -> None:
     """Write an X-Ray Angiographic Image Storage file (explicit VR little endian).
 
@@ -165,6 +169,8 @@ def write_xa_dicom(
     series_description : SeriesDescription.
     representative_frame : 0-based index written to RepresentativeFrameNumber
         (1-based).
+    pixel_intensity_relationship : PixelIntensityRelationship (0028,1040)
+        ("LIN", "LOG", "DISP", ...); not written when None.
 
     Fresh UIDs are generated; the patient is the anonymous "PHANTOM".
     Raises ValueError for arrays or indices that do not fit.
@@ -177,6 +183,7 @@ def write_xa_dicom(
         bits_stored=bits_stored,
         series_description=series_description,
         representative_frame=representative_frame,
+        pixel_intensity_relationship=pixel_intensity_relationship,
     )
     _save_dataset(ds, path)
 

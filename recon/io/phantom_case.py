@@ -35,7 +35,6 @@ from recon.io.dicom_write import write_xa_dicom
 from recon.io.files import atomic_write_bytes
 from recon.io.seeds_file import save_seeds
 from recon.synth import PhantomCase, PhantomError, PhantomTruth
-from recon.synth.render import MAX_VALUE
 
 __all__ = ["write_phantom_case", "load_truth"]
 
@@ -44,7 +43,10 @@ def write_phantom_case(case: PhantomCase, out_dir: str | os.PathLike) -> dict[st
     """Write a.dcm, b.dcm, seeds.json and truth.json into ``out_dir``.
 
     b.dcm carries view B's NOMINAL header although its image was rendered
-    with the true geometry. A rendered case is required.
+    with the true geometry. A rendered case is required. A case made with
+    an imaging chain is written with the chain's bits stored and its
+    PixelIntensityRelationship tag (none when the chain has none), and
+    truth.json records the chain's values and the anatomy variant.
 
     Returns
     -------
@@ -65,8 +67,11 @@ def write_phantom_case(case: PhantomCase, out_dir: str | os.PathLike) -> dict[st
         ("b", case.view_b_nominal, case.image_b, case.frames_b),
     ):
         data = frames if frames is not None else image
-        pixels = np.clip(np.round(data), 0, MAX_VALUE).astype(np.uint16)
+        bits = 12 if case.chain is None else case.chain.bits_stored
+        pixels = np.clip(np.round(data), 0, (1 << bits) - 1).astype(np.uint16)
         kwargs = {}
+        if case.chain is not None:
+            kwargs["pixel_intensity_relationship"] = case.chain.tag
         if frames is not None:
             kwargs = {
                 "frame_time_ms": 66.6667,
@@ -77,7 +82,7 @@ def write_phantom_case(case: PhantomCase, out_dir: str | os.PathLike) -> dict[st
             paths[key],
             pixels,
             view.nominal(),
-            bits_stored=12,
+            bits_stored=bits,
             series_description=f"coronary3d phantom {case.preset} seed {case.seed} view {key}",
             **kwargs,
         )
@@ -92,10 +97,18 @@ def write_phantom_case(case: PhantomCase, out_dir: str | os.PathLike) -> dict[st
         "view_b_true": case.view_b_true.to_dict(),
         **case.truth.to_dict(),
     }
+    if case.chain is not None:
+        doc["chain"] = case.chain.to_dict()
+    if case.anatomy is not None:
+        doc["anatomy"] = {"name": case.anatomy, **_jsonable(case.anatomy_info)}
     # One top-level key per line: readable, and the long arrays stay compact.
     body = ",\n".join(f" {json.dumps(k)}: {json.dumps(v)}" for k, v in doc.items())
     atomic_write_bytes(paths["truth"], ("{\n" + body + "\n}\n").encode())
     return paths
+
+
+def _jsonable(info: dict) -> dict:
+    return {k: list(v) if isinstance(v, tuple) else v for k, v in info.items()}
 
 
 def load_truth(path: str | os.PathLike) -> PhantomTruth:

@@ -11,7 +11,12 @@ files (a.dcm, b.dcm, seeds.json, truth.json) are written by
 Modules: :mod:`~recon.synth.presets` (the C-arm presets),
 :mod:`~recon.synth.tree` (the tree and its truth), :mod:`~recon.synth.clicks`
 (header error and clicks), :mod:`~recon.synth.render` (the X-ray images),
-:mod:`~recon.synth.case` (:func:`make_phantom`).
+:mod:`~recon.synth.case` (:func:`make_phantom`). The varied suite adds
+:mod:`~recon.synth.chains` (imaging chains: detector, mapping, blur,
+scatter / glare, noise, background, bit depth), :mod:`~recon.synth.background`
+(ribs, diaphragm, table edge in mm), :mod:`~recon.synth.chain_render`
+(rendering through a chain), :mod:`~recon.synth.anatomy` (harder anatomy,
+the guiding catheter) and :mod:`~recon.synth.suites` (:func:`varied_cases`).
 
 Frames and conventions
 ----------------------
@@ -35,7 +40,9 @@ Ground truth a benchmark uses
 
 from __future__ import annotations
 
+from recon.synth.anatomy import ANATOMIES, ANATOMY_CYCLE, Anatomy
 from recon.synth.case import PhantomCase, PhantomError, make_phantom
+from recon.synth.chains import CHAINS, ChainDraw, ImagingChain
 from recon.synth.clicks import (
     CLICK_NOISE_PX,
     HEADER_ANGLE_ERROR_DEG,
@@ -46,6 +53,7 @@ from recon.synth.clicks import (
 )
 from recon.synth.presets import PRESETS, PhantomPreset
 from recon.synth.render import path_length_image
+from recon.synth.suites import SuiteCase, make_suite_case, varied_cases
 from recon.synth.tree import PhantomTruth
 
 __all__ = [
@@ -62,4 +70,13 @@ __all__ = [
     "HEADER_SHIFT_MM",
     "CLICK_NOISE_PX",
     "click_px",
+    "ImagingChain",
+    "ChainDraw",
+    "CHAINS",
+    "Anatomy",
+    "ANATOMIES",
+    "ANATOMY_CYCLE",
+    "SuiteCase",
+    "varied_cases",
+    "make_suite_case",
 ]

@@ -3,12 +3,16 @@
 The same ``(preset, seed)`` always gives the same case: four independent
 random streams (header error, tree, clicks, rendering) are spawned from it,
 so the stenosis percentage, ``render`` and ``n_frames`` do not change the
-tree, the header error or the clicks.
+tree, the header error or the clicks. An imaging chain
+(:mod:`recon.synth.chains`) and an anatomy variant
+(:mod:`recon.synth.anatomy`) take a fifth stream of their own (the chain's
+values, the guiding catheter, the variant's choices); with both None a case
+is exactly the plain phantom's.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -16,10 +20,21 @@ from numpy.typing import NDArray
 from recon.errors import CoronaryError
 from recon.geometry import ViewGeometry
 from recon.seeds import Seeds
+from recon.synth.anatomy import (
+    Anatomy,
+    Catheter,
+    add_crossing,
+    faint_fade,
+    guiding_catheter,
+    loop_crossing_views,
+    resolve_anatomy,
+)
+from recon.synth.chain_render import render_chain_view
+from recon.synth.chains import ChainDraw, ImagingChain, draw_chain, resolve_chain
 from recon.synth.clicks import make_seeds, random_header_error
-from recon.synth.presets import PRESETS
+from recon.synth.presets import PRESETS, PhantomPreset
 from recon.synth.render import render_view
-from recon.synth.tree import PhantomTruth, draw_tree, tree_fits, truth_from_tree
+from recon.synth.tree import PhantomTruth, TreeDraw, draw_tree, tree_fits, truth_from_tree
 
 __all__ = ["PhantomCase", "PhantomError", "make_phantom"]
 
@@ -39,12 +54,21 @@ class PhantomCase:
     view_b_nominal : view B's header geometry.
     view_b_true : view B's true geometry (images and clicks are made with it).
     image_a, image_b : (H, W) float32 12-bit values (0..4095, integers), or
-        None when ``render=False``.
+        None when ``render=False``; with an imaging chain, the chain's stored
+        values (0..255 or 0..4095, integers) on its detector.
     frames_a, frames_b : (F, H, W) float32 cine stacks when ``n_frames > 1``,
         else None; ``image_k = frames_k[frame_index]``.
     frame_index : the frame the truth holds for (the sharpest, full contrast).
     seeds : the clinician's clicks, made with the true geometries.
     truth : the ground truth.
+    chain : the imaging chain's drawn values, or None (the plain renderer).
+    anatomy : the anatomy variant's name, or None (the plain tree).
+    catheter : the guiding catheter rendered into both views, or None.
+    anatomy_info : what the variant made: "crossing_view" ("A" or "B": where
+        the crossing vessel lies over the lesion), "loop_s_mm" (the loop's
+        arc-length range on the main vessel) and "loop_crossing_views" (the
+        views where its projection crosses itself), "faint_distal_fraction",
+        "eccentric" ((fraction, angle rad)).
     """
 
     preset: str
@@ -60,57 +84,88 @@ class PhantomCase:
     frames_b: NDArray[np.float32] | None = None
     frame_index: int = 0
     stenosis_pct: float = field(default=50.0)
+    chain: ChainDraw | None = None
+    anatomy: str | None = None
+    catheter: Catheter | None = None
+    anatomy_info: dict = field(default_factory=dict)
 
 
 def make_phantom(
-    preset: str = "data1",
+    preset: str | PhantomPreset = "data1",
     seed: int = 0,
     *,
     stenosis_pct: float = 50.0,
     render: bool = True,
     n_frames: int = 1,
     header_error: bool = True,
+    chain: str | ImagingChain | None = None,
+    anatomy: str | Anatomy | None = None,
 ) -> PhantomCase:
     """Make one synthetic two-view case with its ground truth.
 
     Parameters
     ----------
-    preset : key of :data:`PRESETS` ("data1", "data2", "data3", "static").
+    preset : key of :data:`PRESETS` ("data1", "data2", "data3", "static"), or a
+        :class:`PhantomPreset` (any pair of geometries; its name seeds the case).
     seed : random seed; the same (preset, seed) gives an identical case.
     stenosis_pct : diameter stenosis in percent (0 <= pct < 100).
     render : also render the two images (else image_a/image_b are None).
-    n_frames : frames of the cine stacks (1: no stacks).
+    n_frames : frames of the cine stacks (1: no stacks; chains render one frame).
     header_error : draw a random header error of view B (else nominal == true).
+    chain : an imaging chain (name in :data:`recon.synth.chains.CHAINS`): its
+        detector replaces the preset's (rows, cols, pixel spacing; the field
+        constraints are fractions of the image), and it renders the images.
+        None: the plain renderer.
+    anatomy : an anatomy variant (name in :data:`recon.synth.anatomy.ANATOMIES`);
+        None: the plain tree.
 
     Returns
     -------
     PhantomCase
     """
-    if preset not in PRESETS:
-        raise PhantomError(f"unknown phantom preset {preset!r} (use one of {', '.join(PRESETS)})")
+    p = _resolve_preset(preset)
     if not 0.0 <= stenosis_pct < 100.0:
         raise PhantomError(f"stenosis_pct must be in [0, 100), got {stenosis_pct}")
     if n_frames < 1:
         raise PhantomError(f"n_frames must be at least 1, got {n_frames}")
-    p = PRESETS[preset]
+    try:
+        chain_spec = None if chain is None else resolve_chain(chain)
+        anat = resolve_anatomy(anatomy)
+    except ValueError as err:
+        raise PhantomError(str(err)) from None
+    if chain_spec is not None and n_frames != 1:
+        raise PhantomError("an imaging chain renders one frame: use n_frames=1")
     ss_error, ss_tree, ss_click, ss_render = np.random.SeedSequence(
-        [int(seed), _preset_key(preset)]
+        [int(seed), _preset_key(p.name)]
     ).spawn(4)
-    view_a = p.view_a
-    view_b_nominal = p.view_b
+    extra_rng = np.random.default_rng(np.random.SeedSequence([int(seed), _preset_key(p.name), 1]))
+    draw = None if chain_spec is None else draw_chain(chain_spec, extra_rng)
+    view_a = p.view_a if draw is None else _with_detector(p.view_a, draw)
+    view_b_nominal = p.view_b if draw is None else _with_detector(p.view_b, draw)
     if header_error:
         rotvec, t_mm = random_header_error(np.random.default_rng(ss_error), view_b_nominal)
     else:
         rotvec, t_mm = np.zeros(3), np.zeros(3)
     view_b_true = view_b_nominal.with_correction(rotvec, t_mm)
 
-    rng = np.random.default_rng(ss_tree)
-    for _ in range(2000):
-        tree = draw_tree(rng)
-        if tree is not None and tree_fits(tree, (view_a, view_b_true, view_b_nominal)):
-            break
-    else:  # pragma: no cover - the constraints are loose enough in practice
-        raise PhantomError(f"could not draw a tree inside the field for preset {preset!r}")
+    info: dict = {}
+    crossing_view = None
+    fade = None
+    if anat is not None and anat.crossing:
+        crossing_view = int(extra_rng.integers(2))
+        info["crossing_view"] = "AB"[crossing_view]
+    if anat is not None and anat.faint:
+        fade = faint_fade(extra_rng)
+        info["faint_distal_fraction"] = fade[0]
+    tree = _draw_fitting_tree(np.random.default_rng(ss_tree), anat, crossing_view,
+                              (view_a, view_b_true, view_b_nominal), p.name)
+    if tree.loop_s is not None:
+        info["loop_s_mm"] = tree.loop_s
+        info["loop_crossing_views"] = tuple(
+            "AB"[k] for k in loop_crossing_views(tree.main_X, tree.loop_s, (view_a, view_b_true))
+        )
+    if tree.eccentric is not None:
+        info["eccentric"] = tree.eccentric
 
     truth, branch_names = truth_from_tree(tree, stenosis_pct, rotvec, t_mm)
     seeds = make_seeds(
@@ -121,17 +176,25 @@ def make_phantom(
         view_a,
         view_b_true,
     )
+    catheter = None
+    if draw is not None and "catheter" in draw.background:
+        catheter = guiding_catheter(extra_rng, truth.vessels[0][0], (view_a, view_b_true))
     image_a = image_b = frames_a = frames_b = None
     frame_index = 0
-    if render:
+    if render and draw is not None:
         rrng = np.random.default_rng(ss_render)
-        frames_a, frame_index = render_view(rrng, view_a, truth.vessels, n_frames)
-        frames_b, _ = render_view(rrng, view_b_true, truth.vessels, n_frames)
+        kwargs = {"catheter": catheter} if fade is None else {"catheter": catheter, "fade": fade}
+        image_a = render_chain_view(rrng, view_a, truth.vessels, draw, **kwargs)
+        image_b = render_chain_view(rrng, view_b_true, truth.vessels, draw, **kwargs)
+    elif render:
+        rrng = np.random.default_rng(ss_render)
+        frames_a, frame_index = render_view(rrng, view_a, truth.vessels, n_frames, fade)
+        frames_b, _ = render_view(rrng, view_b_true, truth.vessels, n_frames, fade)
         image_a, image_b = frames_a[frame_index], frames_b[frame_index]
         if n_frames == 1:
             frames_a = frames_b = None
     return PhantomCase(
-        preset=preset,
+        preset=p.name,
         seed=int(seed),
         view_a=view_a,
         view_b_nominal=view_b_nominal,
@@ -144,7 +207,59 @@ def make_phantom(
         frames_b=frames_b,
         frame_index=frame_index,
         stenosis_pct=float(stenosis_pct),
+        chain=draw,
+        anatomy=None if anat is None else anat.name,
+        catheter=catheter,
+        anatomy_info=info,
     )
+
+
+#: Tree draws tried before a case gives up (the plain tree needs a few).
+MAX_TREE_DRAWS = 5000
+
+
+def _draw_fitting_tree(
+    rng: np.random.Generator, anat: Anatomy | None, crossing_view: int | None,
+    views: tuple[ViewGeometry, ViewGeometry, ViewGeometry], name: str,
+) -> TreeDraw:
+    """The first tree draw (with the variant's options) that fits every view.
+
+    ``views`` = (A, B true, B nominal). A loop must cross itself in the
+    projection of A or B; a crossing vessel is added in ``crossing_view``.
+    """
+    flags = {}
+    if anat is not None:
+        flags = {"loop": anat.loop, "branch_stenosis": anat.branch_stenosis,
+                 "eccentric": anat.eccentric}
+    for _ in range(MAX_TREE_DRAWS):
+        tree = draw_tree(rng, **flags)
+        if tree is None:
+            continue
+        if crossing_view is not None:
+            tree = add_crossing(tree, rng, views[:2], crossing_view)
+            if tree is None:
+                continue
+        if not tree_fits(tree, views):
+            continue
+        if tree.loop_s is not None and not loop_crossing_views(tree.main_X, tree.loop_s,
+                                                                views[:2]):
+            continue
+        return tree
+    raise PhantomError(f"could not draw a tree inside the field for preset {name!r}")
+
+
+def _resolve_preset(preset: str | PhantomPreset) -> PhantomPreset:
+    if isinstance(preset, PhantomPreset):
+        return preset
+    if preset not in PRESETS:
+        raise PhantomError(f"unknown phantom preset {preset!r} (use one of {', '.join(PRESETS)})")
+    return PRESETS[preset]
+
+
+def _with_detector(view: ViewGeometry, draw: ChainDraw) -> ViewGeometry:
+    """The view on the chain's detector (rows, cols, square pixel spacing)."""
+    sp = float(draw.pixel_spacing_mm)
+    return replace(view, rows=draw.rows, cols=draw.cols, pixel_spacing_mm=(sp, sp))
 
 
 def _preset_key(preset: str) -> int:

@@ -22,7 +22,8 @@ from scipy import ndimage
 from recon.geometry import ViewGeometry
 from recon.synth.tree import SAMPLE_STEP_MM
 
-__all__ = ["path_length_image", "render_view", "SUPERSAMPLE", "MAX_VALUE"]
+__all__ = ["path_length_image", "render_view", "vessel_attenuations", "SUPERSAMPLE",
+           "MAX_VALUE"]
 
 FloatArray = NDArray[np.float64]
 
@@ -135,6 +136,44 @@ def _pixel_pairs(
     return prim, row * W + col
 
 
+def _footprint_keep(
+    view: ViewGeometry, P0: FloatArray, P1: FloatArray, rmax: FloatArray, ss: int,
+    prim: NDArray[np.int64], flat: NDArray[np.int64],
+) -> NDArray[np.bool_]:
+    """Which (primitive, subpixel) pairs can hit: a conservative test in the image plane.
+
+    Every point of a truncated cone lies within ``rmax`` of its axis, so its
+    image lies within the bounding box's margin ``r_px`` of the projected axis
+    segment; along the axis, the end discs (perpendicular to the axis) reach
+    past the projected segment's ends by only ``r_px |cos|`` (cos of the angle
+    between the axis and the ray), widened here by 5 % and 1 px for
+    perspective. Pairs outside cannot hit, so dropping them changes no result
+    (the hits keep their order); it only saves the ray-cone arithmetic.
+    """
+    W = view.cols * ss
+    p0, p1 = view.project(P0), view.project(P1)
+    depth = np.minimum(view.depth_mm(P0), view.depth_mm(P1)) - rmax
+    spacing = min(view.pixel_spacing_mm)
+    r_px = rmax * view.sid_mm / np.maximum(depth, 1e-6) / spacing + 1.0
+    seg = p1 - p0
+    length = np.linalg.norm(seg, axis=1)
+    e2 = seg / np.maximum(length, 1e-9)[:, None]
+    axis3 = P1 - P0
+    axis3 = axis3 / np.maximum(np.linalg.norm(axis3, axis=1), 1e-12)[:, None]
+    ray = 0.5 * (P0 + P1) - view.source_world
+    ray /= np.linalg.norm(ray, axis=1)[:, None]
+    cos = np.abs(np.einsum("ij,ij->i", axis3, ray))
+    cos = np.where(length > 1e-9, cos, 1.0)
+    end_margin = r_px * (cos + 0.05) + 1.0
+    col = (flat % W + 0.5) / ss - 0.5 - p0[prim, 0]
+    row = (flat // W + 0.5) / ss - 0.5 - p0[prim, 1]
+    along = col * e2[prim, 0] + row * e2[prim, 1]
+    across = np.abs(col * e2[prim, 1] - row * e2[prim, 0])
+    inside = (along >= -end_margin[prim]) & (along <= length[prim] + end_margin[prim])
+    capsule = np.hypot(np.maximum(-along, 0.0) + np.maximum(along - length[prim], 0.0), across)
+    return inside & (across <= r_px[prim]) & (capsule <= r_px[prim] + 1.0)
+
+
 def _subpixel_rays(view: ViewGeometry, flat: NDArray[np.int64], ss: int) -> FloatArray:
     """Unit world directions (N, 3) of the rays through flat subpixel indices."""
     W = view.cols * ss
@@ -245,6 +284,8 @@ def _attenuation_subpixels(
     rmax = np.concatenate([np.maximum(prims.ra, prims.rb), prims.rs])
     mu_all = np.concatenate([prims.mu_cone, prims.mu_sphere])
     prim, flat = _pixel_pairs(view, P0, P1, rmax, ss)
+    keep = _footprint_keep(view, P0, P1, rmax, ss, prim, flat)
+    prim, flat = prim[keep], flat[keep]
     for start in range(0, len(prim), _CHUNK_PAIRS):
         p = prim[start : start + _CHUNK_PAIRS]
         f = flat[start : start + _CHUNK_PAIRS]
@@ -316,6 +357,33 @@ def path_length_image(
     return _block_mean(length, supersample)
 
 
+def vessel_attenuations(
+    vessels: Sequence[tuple[FloatArray, FloatArray]], mu0: float,
+    distal_fraction: float = MU_DISTAL_FRACTION, power: float = 1.0,
+) -> list[FloatArray]:
+    """Attenuation per mm (M,) along each vessel: the plain fade, generalised.
+
+    The main vessel (index 0) fades as ``mu0 (1 - fade frac^power)`` with
+    ``fade = 1 - distal_fraction`` and ``frac`` its arc fraction; another
+    vessel starts at the value of the nearest main-vessel point and fades
+    half as much along itself. ``power = 1`` and ``distal_fraction = 0.7``
+    give the plain phantom's values (to rounding).
+    """
+    fade = 1.0 - distal_fraction
+    main_X = np.asarray(vessels[0][0])
+    main_len = max((len(main_X) - 1) * SAMPLE_STEP_MM, 1e-9)
+    mus = []
+    for k, (X, _) in enumerate(vessels):
+        frac = np.arange(len(X)) / max(len(X) - 1, 1)
+        if k == 0:
+            mus.append(mu0 * (1.0 - fade * frac**power))
+        else:
+            s_origin = np.argmin(np.linalg.norm(main_X - X[0], axis=1)) * SAMPLE_STEP_MM
+            start = 1.0 - fade * (s_origin / main_len) ** power
+            mus.append(mu0 * start * (1.0 - 0.5 * fade * frac**power))
+    return mus
+
+
 def _smooth_field(rng: np.random.Generator, shape: tuple[int, int], sigma_px: float) -> FloatArray:
     """Zero-mean, unit-sd Gaussian random field (H, W) of correlation length ~sigma_px."""
     step = max(sigma_px / 3.0, 1.0)
@@ -361,25 +429,31 @@ def render_view(
     view: ViewGeometry,
     vessels: Sequence[tuple[FloatArray, FloatArray]],
     n_frames: int,
+    fade_curve: tuple[float, float] | None = None,
 ) -> tuple[NDArray[np.float32], int]:
     """Render ``n_frames`` images (F, H, W) of the tree in ``view`` and the truth frame index.
 
     ``vessels`` are (centerline (M, 3) world mm, radius (M,) mm) sampled
     every :data:`SAMPLE_STEP_MM`, index 0 the main vessel, proximal first.
+    ``fade_curve``: (distal fraction, power) of a contrast fade other than
+    the plain one (:func:`vessel_attenuations`), or None.
     """
     ss = SUPERSAMPLE
     mu0 = rng.uniform(*MU_PROXIMAL_PER_MM)
     fade = 1.0 - MU_DISTAL_FRACTION
     main_X = vessels[0][0]
     main_len = max((len(main_X) - 1) * SAMPLE_STEP_MM, 1e-9)
-    mus = []
-    for k, (X, _) in enumerate(vessels):
-        frac = np.arange(len(X)) / max(len(X) - 1, 1)
-        if k == 0:  # contrast fades by `fade` from proximal to distal
-            mus.append(mu0 * (1.0 - fade * frac))
-        else:  # a branch starts at its origin's value and fades more slowly
-            s_origin = np.argmin(np.linalg.norm(main_X - X[0], axis=1)) * SAMPLE_STEP_MM
-            mus.append(mu0 * (1.0 - fade * s_origin / main_len) * (1.0 - 0.5 * fade * frac))
+    if fade_curve is not None:
+        mus = vessel_attenuations(vessels, mu0, *fade_curve)
+    else:
+        mus = []
+        for k, (X, _) in enumerate(vessels):
+            frac = np.arange(len(X)) / max(len(X) - 1, 1)
+            if k == 0:  # contrast fades by `fade` from proximal to distal
+                mus.append(mu0 * (1.0 - fade * frac))
+            else:  # a branch starts at its origin's value and fades more slowly
+                s_origin = np.argmin(np.linalg.norm(main_X - X[0], axis=1)) * SAMPLE_STEP_MM
+                mus.append(mu0 * (1.0 - fade * s_origin / main_len) * (1.0 - 0.5 * fade * frac))
     prims = _cone_chain(vessels, mus)
     att_sub, _ = _attenuation_subpixels(view, prims, ss)
     background = _background_attenuation(rng, view)

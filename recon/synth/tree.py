@@ -7,6 +7,15 @@ foreshortened; the main vessel tapers linearly and carries a cosine stenosis
 of a given diameter percentage. :func:`truth_from_tree` turns a draw into
 the :class:`PhantomTruth` a benchmark measures against (mm, world frame =
 view A's frame).
+
+Harder anatomy (options of :func:`draw_tree`, all off by default; the draw
+with every option off is the plain tree): ``loop`` gives the main vessel a
+full turn that crosses itself on the heart surface, its second pass lifted
+off the surface so the lumen does not touch itself; ``branch_stenosis``
+puts a branch origin on the lesion's shoulder; ``eccentric`` narrows the
+lumen from one side, so the lumen centre (the truth centerline) leaves the
+vessel axis. Vessels that are not branches (a vessel crossing the lesion,
+:mod:`recon.synth.anatomy`) ride along in ``TreeDraw.extra``.
 """
 
 from __future__ import annotations
@@ -42,9 +51,18 @@ BRANCH_RADIUS_MM = (1.0, 1.3)
 BRANCH_ANGLE_DEG = (30.0, 70.0)
 STENOSIS_LENGTH_MM = (6.0, 12.0)
 HEART_RADII_MM = (50.0, 42.0, 58.0)  # ellipsoid semi-axes (scaled by 0.85..1.1)
-FIELD_MARGIN_PX = (20.0, 490.0)  # every projected tree point must fall inside
+FIELD_MARGIN_PX = (20.0, 490.0)  # every projected tree point must fall inside (512 px views)
+#: The same margins as fractions of the image width / height (any detector size).
+FIELD_MARGIN_FRACTION = (20.0 / 512.0, 490.0 / 512.0)
 TREE_EXTENT_MM = 60.0  # and every tree point within this of the isocenter (inf-norm)
 MIN_PROJECTED_FRACTION = 0.5  # segment's projected / (true length x magnification), per view
+LOOP_LENGTH_MM = (28.0, 40.0)  # arc length over which a loop turns by 360 degrees
+LOOP_PROXIMAL_START = (0.16, 0.2)  # a proximal loop starts here (fraction of the main)
+LOOP_DISTAL_END = (0.8, 0.84)  # a distal loop ends here
+LOOP_LIFT_MM = 5.5  # second pass over the surface: > twice the largest main radius + 1 mm
+LOOP_CLEARANCE_MM = 0.5  # least lumen-to-lumen gap between the loop's two passes
+BRANCH_ON_SHOULDER = (0.3, 0.6)  # branch origin from the lesion centre, x lesion length
+ECCENTRICITY = (0.7, 1.0)  # lumen-centre offset / (reference - lumen radius)
 
 
 @dataclass(frozen=True, eq=False)
@@ -178,6 +196,23 @@ def _surface_curve(
     sphere by the azimuthal equidistant map at ``y0`` (initial direction
     ``w0``, tangent) and scaled to the ellipsoid.
     """
+    return _surface_curve_core(rng, heart, y0, w0, length, None)[0]
+
+
+def _surface_curve_core(
+    rng: np.random.Generator, heart: _Heart, y0: FloatArray, w0: FloatArray, length: float,
+    loop: tuple[float, float, float] | None,
+) -> tuple[FloatArray, tuple[float, float] | None]:
+    """:func:`_surface_curve`, optionally with a loop; also the loop's arc-length range.
+
+    ``loop`` = (start mm, length mm, sign): the planar heading gains
+    sign 2 pi smoothstep((s - start) / length), a full turn whose entry and
+    exit legs cross (the turn is slow at its ends, fast in the middle). The
+    map onto the sphere is one-to-one, so the curve crosses itself on the
+    surface too; the second pass is lifted :data:`LOOP_LIFT_MM` along the
+    surface normal (a cos^2 bump) so that it runs over the first. The range
+    is None when the planar loop has no crossing.
+    """
     r0 = float(np.mean(heart.radii))
     n = int(np.ceil(1.6 * length / SAMPLE_STEP_MM))
     s = np.arange(n) * SAMPLE_STEP_MM
@@ -188,6 +223,9 @@ def _surface_curve(
     heading = rng.uniform(-1.0, 1.0) / 150.0 * s  # slow overall turn
     waves = amp * (np.sin(2 * np.pi * s[:, None] / lam + phase) - np.sin(phase))
     heading = heading + waves.sum(axis=1)
+    if loop is not None:
+        x = np.clip((s - loop[0]) / loop[1], 0.0, 1.0)
+        heading = heading + loop[2] * 2 * np.pi * x * x * (3.0 - 2.0 * x)
     q = np.cumsum(np.column_stack([np.cos(heading), np.sin(heading)]), axis=0) * SAMPLE_STEP_MM
     q = np.vstack([[0.0, 0.0], q[:-1]])
     rho = np.linalg.norm(q, axis=1)
@@ -198,7 +236,63 @@ def _surface_curve(
     e2 = np.cross(y0, e1)
     dirs3 = dirs2[:, :1] * e1 + dirs2[:, 1:] * e2
     y = np.cos(ang)[:, None] * y0 + np.sin(ang)[:, None] * dirs3
-    return _resample_uniform(heart.from_unit(y), SAMPLE_STEP_MM, length)
+    X = heart.from_unit(y)
+    loop_s = None
+    if loop is not None:
+        crossing = _planar_crossing(q, s, loop[0], loop[1])
+        if crossing is None or np.max(ang) >= np.pi:
+            return _resample_uniform(X, SAMPLE_STEP_MM, length), None
+        i, j = crossing
+        half = 0.8 * (s[j] - s[i])
+        u = np.clip((s - s[j]) / half, -1.0, 1.0)
+        lift = LOOP_LIFT_MM * np.cos(0.5 * np.pi * u) ** 2
+        X = X + lift[:, None] * _surface_normals(heart, X)
+        s3 = arclength(X)
+        k0, k1 = np.searchsorted(s, [loop[0], loop[0] + loop[1]])
+        loop_s = (float(s3[min(k0, n - 1)]), float(s3[min(k1, n - 1)]))
+    return _resample_uniform(X, SAMPLE_STEP_MM, length), loop_s
+
+
+def _surface_normals(heart: _Heart, X: FloatArray) -> FloatArray:
+    """Outward unit normals (N, 3) of the heart ellipsoid at points X (N, 3)."""
+    n = (((X - heart.centre) @ heart.Q) / heart.radii**2) @ heart.Q.T
+    return n / np.linalg.norm(n, axis=1, keepdims=True)
+
+
+def _planar_crossing(
+    q: FloatArray, s: FloatArray, start: float, length: float
+) -> tuple[int, int] | None:
+    """Sample indices (i < j) where the planar curve q (N, 2) crosses itself in the loop.
+
+    The pair closest together among samples of the loop window at least 5 mm
+    of arc apart, accepted when it is closer than one sample step.
+    """
+    idx = np.flatnonzero((s >= start - 2.0) & (s <= start + length + 2.0))
+    if len(idx) < 3:
+        return None
+    d = np.linalg.norm(q[idx, None, :] - q[None, idx, :], axis=2)
+    far = np.abs(s[idx, None] - s[None, idx]) >= 5.0
+    d = np.where(far & (idx[:, None] < idx[None, :]), d, np.inf)
+    a, b = np.unravel_index(int(np.argmin(d)), d.shape)
+    if not d[a, b] < SAMPLE_STEP_MM:
+        return None
+    return int(idx[a]), int(idx[b])
+
+
+def _loop_clear(X: FloatArray, loop_s: tuple[float, float]) -> bool:
+    """Whether the loop's two passes keep :data:`LOOP_CLEARANCE_MM` between their lumens.
+
+    Lumens are bounded by the largest main radius r; samples less than
+    6 mm + 2 r of arc apart are neighbours along the vessel, not the other pass.
+    """
+    s = np.arange(len(X)) * SAMPLE_STEP_MM
+    idx = np.flatnonzero((s >= loop_s[0] - 3.0) & (s <= loop_s[1] + 3.0))[::2]
+    if len(idx) < 2:
+        return False
+    d = np.linalg.norm(X[idx, None, :] - X[None, idx, :], axis=2)
+    apart = np.abs(s[idx, None] - s[None, idx]) > 6.0 + 2 * MAIN_RADIUS_PROXIMAL_MM[1]
+    gap = 2 * MAIN_RADIUS_PROXIMAL_MM[1] + LOOP_CLEARANCE_MM
+    return bool(np.all(d[apart] >= gap))
 
 
 def _random_tangent(rng: np.random.Generator, y0: FloatArray) -> FloatArray:
@@ -221,10 +315,27 @@ class TreeDraw:
     sten_len: float
     r_main: tuple[float, float]
     r_branch: tuple[tuple[float, float], ...]
+    #: (centerline (M, 3) mm, radius (M,) mm, name) of vessels that are not branches.
+    extra: tuple[tuple[FloatArray, FloatArray, str], ...] = ()
+    #: (fraction, angle rad) of an eccentric stenosis, or None (concentric).
+    eccentric: tuple[float, float] | None = None
+    #: (start, end) arc length (mm) of the main vessel's loop, or None.
+    loop_s: tuple[float, float] | None = None
 
 
-def draw_tree(rng: np.random.Generator) -> TreeDraw | None:
-    """One random tree; None when the draw does not satisfy the constraints."""
+def draw_tree(
+    rng: np.random.Generator,
+    *,
+    loop: bool = False,
+    branch_stenosis: bool = False,
+    eccentric: bool = False,
+) -> TreeDraw | None:
+    """One random tree; None when the draw does not satisfy the constraints.
+
+    ``loop``, ``branch_stenosis`` and ``eccentric`` are the harder anatomy
+    of the module docstring; with all three off the draw (and the random
+    numbers it takes) is the plain tree's.
+    """
     radii = np.asarray(HEART_RADII_MM) * rng.uniform(0.85, 1.1)
     heart = _Heart(
         centre=rng.uniform(-8.0, 8.0, 3),
@@ -234,7 +345,20 @@ def draw_tree(rng: np.random.Generator) -> TreeDraw | None:
     length = rng.uniform(*MAIN_LENGTH_MM)
     y0 = rng.normal(size=3)
     y0 /= np.linalg.norm(y0)
-    main_X = _surface_curve(rng, heart, y0, _random_tangent(rng, y0), length)
+    loop_s = None
+    if loop:
+        loop_len = rng.uniform(*LOOP_LENGTH_MM)
+        if rng.uniform() < 0.5:
+            loop_start = rng.uniform(*LOOP_PROXIMAL_START) * length
+        else:
+            loop_start = rng.uniform(*LOOP_DISTAL_END) * length - loop_len
+        loop_spec = (loop_start, loop_len, float(rng.choice([-1.0, 1.0])))
+        main_X, loop_s = _surface_curve_core(rng, heart, y0, _random_tangent(rng, y0), length,
+                                             loop_spec)
+        if loop_s is None or not _loop_clear(main_X, loop_s):
+            return None
+    else:
+        main_X = _surface_curve(rng, heart, y0, _random_tangent(rng, y0), length)
     if arclength(main_X)[-1] < 0.98 * length:
         return None
     n = len(main_X)
@@ -250,8 +374,27 @@ def draw_tree(rng: np.random.Generator) -> TreeDraw | None:
     sten_len = rng.uniform(*STENOSIS_LENGTH_MM)
     seg_s0, seg_s1 = s_main[seg_start], s_main[seg_end]
     sten_s = seg_s0 + rng.uniform(0.3, 0.7) * (seg_s1 - seg_s0)
-    if np.min(np.abs(branch_s - sten_s)) < sten_len / 2 + 3.0:
+    if loop_s is not None:  # the lesion goes anywhere in 20-80 % of the segment clear of the loop
+        cand = seg_s0 + np.linspace(0.2, 0.8, 121) * (seg_s1 - seg_s0)
+        clear = (cand + sten_len / 2 + 3.0 <= loop_s[0]) | (cand - sten_len / 2 - 3.0 >= loop_s[1])
+        if not np.any(clear):
+            return None
+        sten_s = float(cand[clear][int(rng.integers(int(np.sum(clear))))])
+    if branch_stenosis:  # the nearest branch moves onto the lesion's shoulder
+        k = int(np.argmin(np.abs(branch_s - sten_s)))
+        side = float(rng.choice([-1.0, 1.0]))
+        branch_s = branch_s.copy()
+        branch_s[k] = sten_s + side * sten_len * rng.uniform(*BRANCH_ON_SHOULDER)
+        others = np.delete(branch_s, k)
+        if len(others) and np.min(np.abs(others - sten_s)) < sten_len / 2 + 3.0:
+            return None
+    elif np.min(np.abs(branch_s - sten_s)) < sten_len / 2 + 3.0:
         return None
+    if loop_s is not None and (
+        (sten_s + sten_len / 2 + 3.0 > loop_s[0] and sten_s - sten_len / 2 - 3.0 < loop_s[1])
+        or loop_s[0] < seg_s0 + 2.0 or loop_s[1] > seg_s1 - 2.0
+    ):
+        return None  # the loop lies inside the segment, clear of the lesion
     branches = []
     r_branch = []
     tangents = np.gradient(main_X, axis=0)
@@ -269,6 +412,8 @@ def draw_tree(rng: np.random.Generator) -> TreeDraw | None:
         branches.append(_surface_curve(rng, heart, yb, w, rng.uniform(*BRANCH_LENGTH_MM)))
         rb0 = rng.uniform(*BRANCH_RADIUS_MM)
         r_branch.append((rb0, rb0 * rng.uniform(0.55, 0.7)))
+    r_main = (rng.uniform(*MAIN_RADIUS_PROXIMAL_MM), rng.uniform(*MAIN_RADIUS_DISTAL_MM))
+    ecc = (rng.uniform(*ECCENTRICITY), rng.uniform(0.0, 2 * np.pi)) if eccentric else None
     return TreeDraw(
         heart=heart,
         main_X=main_X,
@@ -278,22 +423,25 @@ def draw_tree(rng: np.random.Generator) -> TreeDraw | None:
         seg_end=seg_end,
         sten_s_main=float(sten_s),
         sten_len=float(sten_len),
-        r_main=(rng.uniform(*MAIN_RADIUS_PROXIMAL_MM), rng.uniform(*MAIN_RADIUS_DISTAL_MM)),
+        r_main=r_main,
         r_branch=tuple(r_branch),
+        eccentric=ecc,
+        loop_s=loop_s,
     )
 
 
 def tree_fits(tree: TreeDraw, views: Sequence[ViewGeometry]) -> bool:
     """Whether the whole tree projects inside every view and the segment is not foreshortened."""
-    X = np.vstack([tree.main_X, *tree.branches_X])
+    X = np.vstack([tree.main_X, *tree.branches_X, *(e[0] for e in tree.extra)])
     if np.max(np.abs(X)) > TREE_EXTENT_MM:
         return False
-    lo, hi = FIELD_MARGIN_PX
     seg_X = tree.main_X[tree.seg_start : tree.seg_end + 1]
     seg_len = (len(seg_X) - 1) * SAMPLE_STEP_MM
     for view in views:
+        size = np.array([view.cols, view.rows], dtype=float)
+        lo, hi = FIELD_MARGIN_FRACTION[0] * size, FIELD_MARGIN_FRACTION[1] * size
         p = view.project(X)
-        if p.min() < lo or p.max() > hi:
+        if np.any(p < lo) or np.any(p > hi):
             return False
         # Views are chosen to show the segment without strong foreshortening.
         mag_px = view.sid_mm / view.depth_mm(seg_X).mean() / min(view.pixel_spacing_mm)
@@ -313,6 +461,29 @@ def _main_radius(tree: TreeDraw, s_mm: FloatArray, stenosis_pct: float) -> Float
     return r_ref * (1.0 - stenosis_pct / 100.0 * bump)
 
 
+def _eccentric_centre(tree: TreeDraw, s_mm: FloatArray, r_mm: FloatArray) -> FloatArray:
+    """The lumen centre (M, 3) of an eccentric stenosis: the axis moved towards one wall.
+
+    The wall on the side ``angle`` (about the axis, from the heart's outward
+    normal) stays where the undiseased lumen had it when ``fraction`` is 1:
+    the centre moves by ``fraction (r_ref - r)`` away from that side, so the
+    lumen (radius r) narrows from the opposite side only.
+    """
+    fraction, angle = tree.eccentric
+    r0, r1 = tree.r_main
+    r_ref = r0 + (r1 - r0) * s_mm / ((len(tree.main_X) - 1) * SAMPLE_STEP_MM)
+    offset = fraction * (r_ref - r_mm)
+    X = tree.main_X
+    t = np.gradient(X, axis=0)
+    t /= np.linalg.norm(t, axis=1, keepdims=True)
+    n1 = _surface_normals(tree.heart, X)
+    n1 = n1 - np.sum(n1 * t, axis=1, keepdims=True) * t
+    n1 /= np.linalg.norm(n1, axis=1, keepdims=True)
+    n2 = np.cross(t, n1)
+    side = np.cos(angle) * n1 + np.sin(angle) * n2
+    return X - offset[:, None] * side
+
+
 def _main_reference_radius(tree: TreeDraw, s_mm: float) -> float:
     r0, r1 = tree.r_main
     return float(r0 + (r1 - r0) * s_mm / ((len(tree.main_X) - 1) * SAMPLE_STEP_MM))
@@ -328,7 +499,10 @@ def truth_from_tree(
     """
     s_main = np.arange(len(tree.main_X)) * SAMPLE_STEP_MM
     r_main = _main_radius(tree, s_main, stenosis_pct)
-    vessels = [(tree.main_X, r_main)]
+    main_X = tree.main_X
+    if tree.eccentric is not None:
+        main_X = _eccentric_centre(tree, s_main, r_main)
+    vessels = [(main_X, r_main)]
     names = ["main"]
     branch_names = []
     for k, (Xb, (rb0, rb1)) in enumerate(zip(tree.branches_X, tree.r_branch, strict=True)):
@@ -336,12 +510,21 @@ def truth_from_tree(
         vessels.append((Xb, rb0 + (rb1 - rb0) * sb / sb[-1]))
         names.append(f"branch {k + 1}")
         branch_names.append(f"bifurcation {k + 1}")
+    for Xe, re_, name in tree.extra:
+        vessels.append((Xe, re_))
+        names.append(name)
     i0, i1 = tree.seg_start, tree.seg_end
-    seg_X = tree.main_X[i0 : i1 + 1]
+    seg_X = main_X[i0 : i1 + 1]
     seg_r = r_main[i0 : i1 + 1]
-    seg_s = s_main[i0 : i1 + 1] - s_main[i0]
+    in_lesion = np.abs(s_main[i0 : i1 + 1] - tree.sten_s_main) <= tree.sten_len / 2
+    if tree.eccentric is None:
+        seg_s = s_main[i0 : i1 + 1] - s_main[i0]
+        sten_s = tree.sten_s_main - s_main[i0]
+    else:  # the lumen centre's own arc length (it leaves the axis at the lesion)
+        seg_s = arclength(seg_X)
+        sten_s = float(np.interp(tree.sten_s_main - s_main[i0], s_main[i0 : i1 + 1] - s_main[i0],
+                                 seg_s))
     volume = float(np.pi * np.trapezoid(seg_r**2, seg_s))
-    sten_s = tree.sten_s_main - s_main[i0]
     branch_origins = np.array([Xb[0] for Xb in tree.branches_X]).reshape(-1, 3)
     features = np.vstack([seg_X[0], seg_X[-1], branch_origins])
     truth = PhantomTruth(
@@ -352,7 +535,7 @@ def truth_from_tree(
         stenosis_s_mm=float(sten_s),
         stenosis_length_mm=tree.sten_len,
         stenosis_diameter_pct=float(stenosis_pct),
-        mld_mm=float(2.0 * seg_r[np.abs(seg_s - sten_s) <= tree.sten_len / 2].min()),
+        mld_mm=float(2.0 * seg_r[in_lesion].min()),
         reference_diameter_mm=2.0 * _main_reference_radius(tree, tree.sten_s_main),
         features_world=features,
         feature_names=("main proximal", "main distal", *branch_names),

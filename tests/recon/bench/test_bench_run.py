@@ -1,4 +1,4 @@
-"""Every bench module's run takes the same arguments: run(cases=None, seed=0)."""
+"""Every bench's run takes run(cases=None, seed=0); centerline and reconstruct also a suite."""
 
 from __future__ import annotations
 
@@ -14,12 +14,20 @@ from recon.synth import make_phantom
 BENCHES = ("centerline", "calibration", "matching", "reconstruct")
 
 
+#: Parameters after (cases, seed): the suite for the benches that take --suite varied,
+#: and the click jitter of bench reconstruct.
+EXTRA = {"centerline": {"suite": "regular"},
+         "reconstruct": {"suite": "regular", "jitter": 0}}
+
+
 @pytest.mark.parametrize("name", BENCHES)
 def test_run_signature_is_cases_and_seed(name: str) -> None:
     module = importlib.import_module(f"recon.bench.{name}")
     params = inspect.signature(module.run).parameters
-    assert list(params) == ["cases", "seed"]
+    extra = EXTRA.get(name, {})
+    assert list(params) == ["cases", "seed", *extra]
     assert params["cases"].default is None and params["seed"].default == 0
+    assert {k: params[k].default for k in extra} == extra
     assert all(p.kind is inspect.Parameter.POSITIONAL_OR_KEYWORD for p in params.values())
 
 

@@ -121,3 +121,23 @@ def test_rendering_is_deterministic():
     first = a.frames_a[0][p[:, 1], p[:, 0]].mean()
     chosen = a.image_a[p[:, 1], p[:, 0]].mean()
     assert chosen < first
+
+
+def test_the_footprint_prefilter_drops_no_hit(monkeypatch):
+    """The image-plane prefilter only skips (cone, ray) pairs that miss: results are identical."""
+    from dataclasses import replace
+
+    import recon.synth.render as render
+
+    case = make_phantom("data3", 102, render=False)
+    prims = render._cone_chain(case.truth.vessels, [0.1] * len(case.truth.vessels))
+    for view, ss in ((case.view_b_true, 2),
+                     (replace(case.view_a, rows=1024, cols=1024,
+                              pixel_spacing_mm=(0.154, 0.154)), 1)):
+        att, length = render._attenuation_subpixels(view, prims, ss)
+        monkeypatch.setattr(render, "_footprint_keep",
+                            lambda view, P0, P1, rmax, ss, prim, flat: np.ones(len(prim), bool))
+        att_all, length_all = render._attenuation_subpixels(view, prims, ss)
+        monkeypatch.undo()
+        assert np.array_equal(att, att_all) and np.array_equal(length, length_all)
+        assert length.max() > 3.0

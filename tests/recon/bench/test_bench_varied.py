@@ -1,0 +1,94 @@
+"""The varied suite's benches: JSON keys per chain and overall, failures counted, stability."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+import recon.synth.suites as suites
+from recon.bench import centerline, reconstruct
+from recon.bench.common import jitter_seeds, rigid_rms_mm
+from recon.geometry import rotation_from_rotvec
+from recon.synth import make_phantom
+
+CHAIN_KEYS = {"cases", "traces", "trace_success", "refused", "lost", "centerline_rms_px",
+              "radius_bias_pct", "radius_mae_px"}
+RECON_KEYS = {"cases", "succeeded", "failed", "abs_mld_error_mm", "p90_abs_mld_error_mm",
+              "abs_length_error_pct", "abs_volume_error_pct", "centerline_3d_rms_rigid_mm",
+              "max_centerline_3d_rms_rigid_mm", "failures"}
+
+
+@pytest.fixture
+def tiny_suite(monkeypatch):
+    """Two 512 px cases of two chains (the full suite takes minutes)."""
+    real = suites.varied_cases
+
+    def tiny(n_per_chain: int = 8, seed: int = 0):
+        cases = real(1, seed)
+        return [c for c in cases if c.chain in ("sharp-display", "glare-8bit")]
+
+    monkeypatch.setattr(suites, "varied_cases", tiny)
+
+
+def test_bench_centerline_varied_keys(tiny_suite):
+    result = centerline.run(cases=1, suite="varied")
+    json.dumps(result, default=float)
+    assert result["suite"] == "varied" and set(result["chains"]) == {"sharp-display",
+                                                                    "glare-8bit"}
+    for figures in [*result["chains"].values(), result["overall"]]:
+        assert CHAIN_KEYS <= set(figures)
+    assert result["overall"]["traces"] == 4 and len(result["rows"]) == 4
+    # A refused trace is a failure, not skipped.
+    for row in result["rows"]:
+        assert row["status"] in ("ok", "lost", "refused")
+        assert row["success"] == (row["status"] == "ok")
+    assert "overall" in centerline.format_table(result)
+
+
+def test_bench_reconstruct_varied_keys_and_stability(tiny_suite):
+    result = reconstruct.run(cases=1, suite="varied", jitter=1)
+    json.dumps(result, default=float)
+    for figures in [*result["chains"].values(), result["overall"]]:
+        assert RECON_KEYS <= set(figures)
+    assert result["overall"]["cases"] == 2
+    st = result["stability"]
+    assert st["jitter_px"] == 2.0 and len(st["cases"]) == 2
+    for key in ("stable_fraction", "mld_spread_mm_median", "ds_spread_pct_median",
+                "site_spread_mm_median"):
+        assert key in st["overall"]
+    assert "click stability" in reconstruct.format_table(result)
+
+
+def test_unknown_suite_is_refused():
+    with pytest.raises(ValueError, match="unknown suite"):
+        centerline.run(cases=1, suite="nope")
+
+
+def test_jittered_clicks_stay_within_the_disc():
+    case = make_phantom("data1", 0, render=False)
+    rng = np.random.default_rng(0)
+    moved = jitter_seeds(case.seeds, rng, 2.0, (512, 512), (512, 512))
+    a0, a1 = case.seeds.segments[0].a, moved.segments[0].a
+    d = np.linalg.norm(a1 - a0, axis=1)
+    assert np.all(d <= 2.0 + 0.08) and np.any(d > 0.1)
+    assert len(moved.features) == len(case.seeds.features)
+
+
+def test_rigid_rms_removes_a_rotation_and_translation_but_not_a_scale():
+    s = np.linspace(0, 1, 400)
+    truth = np.column_stack([60 * s, 10 * np.sin(4 * s), 5 * s**2])
+    R = rotation_from_rotvec(np.array([0.02, -0.03, 0.05]))
+    moved = truth @ R.T + [3.0, -2.0, 1.0]
+    assert rigid_rms_mm(moved, truth) < 1e-3
+    assert rigid_rms_mm(truth * 1.02, truth) > 0.03  # a scale is not aligned away
+
+
+def test_cli_refuses_a_suite_or_jitter_where_there_is_none(capsys):
+    from recon.cli import main
+
+    assert main(["bench", "calibration", "--suite", "varied"]) == 2
+    assert "no --suite varied" in capsys.readouterr().err
+    assert main(["bench", "centerline", "--jitter", "3"]) == 2
+    assert "--jitter" in capsys.readouterr().err
