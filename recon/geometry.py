@@ -159,6 +159,11 @@ class ViewGeometry:
         return self.R_corr @ d_nominal + np.asarray(self.t_corr_mm)
 
     @property
+    def pixel_mm_at_isocenter(self) -> float:
+        """Size (mm) of one detector pixel at the isocenter: mean spacing x SOD / SID."""
+        return float(np.mean(self.pixel_spacing_mm)) * self.sod_mm / self.sid_mm
+
+    @property
     def centre_px(self) -> tuple[float, float]:
         """Principal point (col, row) in pixels."""
         return (

@@ -44,7 +44,6 @@ __all__ = [
     "Reconstruction",
     "calibrate_from_seeds",
     "input_warnings",
-    "pixel_mm_at_vessel",
     "reconstruct_pair",
 ]
 
@@ -245,7 +244,7 @@ def reconstruct_pair(
 
     # 1. Vessel centerline, radius and brightness in each view (sec. 3.3.1).
     _notify(progress, "tracing the vessel in both views", 0.0)
-    pixel_mm_a, pixel_mm_b = pixel_mm_at_vessel(view_a), pixel_mm_at_vessel(view_b_header)
+    pixel_mm_a, pixel_mm_b = view_a.pixel_mm_at_isocenter, view_b_header.pixel_mm_at_isocenter
     if vesselness is None:
         vesselness = (
             compute_vesselness(angio_a.image, pixel_mm=pixel_mm_a),
@@ -326,11 +325,6 @@ def reconstruct_pair(
         consistency=consistency,
         warnings=tuple(warnings),
     )
-
-
-def pixel_mm_at_vessel(view: ViewGeometry) -> float:
-    """Size (mm) of one detector pixel at the isocenter: spacing x SOD / SID."""
-    return float(np.mean(view.pixel_spacing_mm)) * view.sod_mm / view.sid_mm
 
 
 def _trace(

@@ -157,12 +157,12 @@ class View:
     def get_vesselness(self) -> object:
         """Vesselness of the current frame, computed once (recon.centerline)."""
         from recon.centerline import compute_vesselness
-        from recon.pipeline import pixel_mm_at_vessel
 
         with self.vesselness_lock:
             if self.vesselness is None:
-                pixel_mm = pixel_mm_at_vessel(self.angio.geometry)
-                self.vesselness = compute_vesselness(self.angio.image, pixel_mm=pixel_mm)
+                self.vesselness = compute_vesselness(
+                    self.angio.image, pixel_mm=self.angio.geometry.pixel_mm_at_isocenter
+                )
             return self.vesselness
 
 

@@ -45,7 +45,6 @@ from recon.bench.common import (
     median,
     parallel_map,
     percentile,
-    pixel_mm_at_isocenter,
 )
 from recon.centerline import compute_vesselness, trace_segment
 from recon.geometry import ViewGeometry
@@ -196,24 +195,16 @@ def format_table(result: dict) -> str:
 
 
 # ------------------------------------------------------------------ varied suite
-def _supported(fn, **kwargs) -> dict:
-    """The keyword arguments ``fn`` accepts (the tracing's options grow over time)."""
-    import inspect
-
-    params = inspect.signature(fn).parameters
-    return {k: v for k, v in kwargs.items() if k in params and v is not None}
-
-
 def _evaluate_varied_view(image: np.ndarray, view: ViewGeometry, clicks_px: np.ndarray,
                           case, name: str) -> dict:
     """One trace of the varied suite against the truth; raises what the tracing raises."""
     tag = case.chain.tag if case.chain is not None else None
-    pixel_mm = pixel_mm_at_isocenter(view)
+    pixel_mm = view.pixel_mm_at_isocenter
     t0 = time.perf_counter()
-    vmap = compute_vesselness(image, **_supported(compute_vesselness, pixel_mm=pixel_mm))
+    vmap = compute_vesselness(image, pixel_mm=pixel_mm)
     t1 = time.perf_counter()
     cl = trace_segment(image, clicks_px, vesselness=vmap, view=name,
-                       **_supported(trace_segment, pixel_mm=pixel_mm, relationship=tag))
+                       pixel_mm=pixel_mm, relationship=tag)
     t2 = time.perf_counter()
     main_X, main_r = case.truth.vessels[0]
     dense, radius_true = _dense_truth(view, main_X, main_r)

@@ -32,7 +32,6 @@ __all__ = [
     "VARIED_CASES_PER_CHAIN",
     "check_suite",
     "case_angiogram",
-    "pixel_mm_at_isocenter",
     "jitter_seeds",
     "rigid_rms_mm",
     "parallel_map",
@@ -90,11 +89,6 @@ def case_angiogram(image: np.ndarray, view: ViewGeometry, name: str, chain=None)
     return Angiogram(image=np.asarray(image, dtype=np.float32), geometry=view, path=name,
                      frame_index=0, frame_reason="single frame", n_frames=1,
                      frame_time_ms=None, frames=None, geometry_notes=(), info=info)
-
-
-def pixel_mm_at_isocenter(view: ViewGeometry) -> float:
-    """Detector pixel size scaled to the isocenter, mm: spacing x SOD / SID."""
-    return float(np.mean(view.pixel_spacing_mm)) * view.sod_mm / view.sid_mm
 
 
 def jitter_seeds(seeds, rng: np.random.Generator, radius_px: float,

@@ -134,3 +134,8 @@ def test_view_separation():
 def test_invalid_geometry_rejected():
     with pytest.raises(ValueError, match="sod_mm"):
         make_view(0, 0, sid=700, sod=750)
+
+
+def test_pixel_size_at_the_isocenter_is_the_detector_spacing_over_the_magnification():
+    view = ViewGeometry(0.0, 0.0, 1000.0, 750.0, (0.4, 0.2), 512, 512)
+    assert view.pixel_mm_at_isocenter == pytest.approx(0.3 * 750.0 / 1000.0)
