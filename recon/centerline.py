@@ -87,6 +87,10 @@ _RADIUS_TOL = 0.15
 _RSS_TOL = 3.0
 #: Largest radius (px) the profile tables cover.
 _R_CAP_PX = 40.0
+#: Tukey's biweight constant (95 % efficiency at the normal) and the least cut-off (px)
+#: of the shifts' outlier test.
+_TUKEY_C = 4.685
+_MIN_CUTOFF_PX = 1.0
 #: Lumen radii at each end of a trace over which the radius is held (no end dip).
 _END_HOLD = 1.5
 #: Box-Cox power of the absorption used for centring before the mapping is known
@@ -158,6 +162,35 @@ def _reliability(radius_px: FloatArray, rss: FloatArray, fitted: NDArray[np.bool
     ratio = np.clip(rss / max(_RSS_TOL * rss_ref, 1e-30) - 1.0, 0.0, None)
     w_fit = 1.0 / (1.0 + ratio) / (1.0 + (excess / 0.1) ** 2)
     return np.where(fitted, np.clip(w_fit, 1e-3, 1.0), 1e-3)
+
+
+def _robust_shift(shift_px: FloatArray, weight: FloatArray,
+                  radius_px: FloatArray) -> tuple[FloatArray, FloatArray, float]:
+    """Shifts (N,) along the normals of a curve sampled 1 px apart, smoothed along it.
+
+    A weighted Gaussian average (normalised convolution, sigma half a lumen radius,
+    at least 1.5 px) with Tukey's biweight reweighting (Beaton & Tukey,
+    Technometrics 1974): a fit pulled onto a neighbour at a junction or a crossing
+    (a shift far from those around it) gets no weight. Returns the smoothed shifts
+    (N,), each fit's inlier weight (N,) in [0, 1] and the fits' scatter (px, a
+    robust standard deviation about the smoothed shifts).
+    """
+    sigma = max(0.5 * float(np.median(radius_px)), 1.5)
+    base = np.clip(np.nan_to_num(weight), 0.0, None)
+    used = base > 0.5
+    x = np.nan_to_num(shift_px)
+    inlier = np.ones(len(x))
+    smooth, scatter = x, 0.0
+    for _ in range(4):
+        w = base * inlier
+        num = ndi.gaussian_filter1d(w * x, sigma, mode="nearest")
+        den = ndi.gaussian_filter1d(w, sigma, mode="nearest")
+        smooth = np.where(den > 1e-9, num / np.maximum(den, 1e-12), x)
+        resid = np.abs(x - smooth)
+        scatter = 1.4826 * float(np.median(resid[used] if np.any(used) else resid))
+        u = (x - smooth) / max(_TUKEY_C * scatter, _MIN_CUTOFF_PX)
+        inlier = np.where(np.abs(u) < 1.0, (1.0 - u**2) ** 2, 0.0)
+    return smooth, inlier, scatter
 
 
 def _limit_runs(
@@ -397,6 +430,8 @@ def trace_segment(
         fitted = np.isfinite(rss) & np.isfinite(radius1)
         fitted[[0, -1]] = True
         weight = _reliability(radius1, rss, fitted)
+        _, inlier, scatter_px = _robust_shift(shift, weight * fitted, r_guess)
+        weight = weight * np.maximum(inlier, 1e-3)
         refined = coarse + shift[:, None] * normals
         trusted = fitted & (weight > 0.5)
         if it == _N_REFINE - 1 or not np.any(np.abs(shift[trusted]) >= 0.3):
@@ -405,7 +440,8 @@ def trace_segment(
         # (a cut corner), not a neighbour: follow it so the next pass can resolve it.
         runs = _limit_runs(shift, limit_px=fit.max_shift_px)
         pull = np.where(weight > 0.5, weight, np.maximum(weight, 0.5 * runs))
-        coarse = _smooth_spline(refined[fitted], _COARSE_SIGMA_PX, 1.0, pull[fitted])
+        coarse = _smooth_spline(refined[fitted], max(_COARSE_SIGMA_PX, scatter_px), 1.0,
+                                pull[fitted])
         r_guess = np.interp(np.linspace(0, 1, len(coarse)), np.linspace(0, 1, int(fitted.sum())),
                             np.nan_to_num(radius1[fitted], nan=2.0))
         r_guess = np.clip(r_guess, 1.0, _R_CAP_PX)
@@ -414,7 +450,7 @@ def trace_segment(
 
     # Pass 2: the smoothing spline at uniform arc length, then radius at every point
     # from profiles linearised by the Box-Cox power that fits this trace best.
-    points = _smooth_spline(refined, _FINE_SIGMA_PX, spacing_px, weight)
+    points = _smooth_spline(refined, max(_FINE_SIGMA_PX, scatter_px), spacing_px, weight)
     normals = _unit_normals(points)
     r_guess = np.interp(
         np.linspace(0, 1, len(points)), np.linspace(0, 1, int(ok.sum())), radius1[ok]

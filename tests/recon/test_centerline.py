@@ -331,3 +331,28 @@ def test_trace_records_its_intensity_mapping_and_blur() -> None:
     assert "set by the user" in fixed.intensity_reason
     with pytest.raises(ValueError, match="intensity must be one of"):
         trace_segment(img, [(15.0, 40.0), (145.0, 40.0)], intensity="gamma")
+
+
+def test_robust_shift_gives_no_weight_to_fits_pulled_onto_a_neighbour() -> None:
+    from recon.centerline import _robust_shift
+
+    rng = np.random.default_rng(3)
+    n = 120
+    true = 0.5 * np.sin(np.arange(n) / 15.0)  # a slowly varying offset (px)
+    shift = true + rng.normal(0.0, 0.2, n)
+    shift[50:56] += np.array([2.5, 3.5, 4.5, 4.0, 3.0, 2.5])  # a junction pulls six fits
+    smooth, inlier, scatter = _robust_shift(shift, np.ones(n), np.full(n, 8.0))
+    assert inlier[50:56].max() < 0.1
+    assert np.median(inlier[np.r_[0:45, 60:n]]) > 0.9
+    assert np.abs(smooth - true).max() < 0.35
+    assert scatter == pytest.approx(0.2, abs=0.08)
+
+
+def test_trace_of_a_wide_vessel_is_not_pulled_into_a_joining_branch() -> None:
+    main = segment((10, 60), (250, 60))
+    a = np.deg2rad(30.0)  # a branch joins the main vessel (radius 10 px) at 30 degrees
+    branch = segment((128, 62), (128 - 90 * np.cos(a), 62 + 90 * np.sin(a)))
+    img = render((140, 260), [(main, np.full(len(main), 10.0)),
+                              (branch, np.full(len(branch), 8.0))], noise=15.0, seed=4)
+    cl = trace_segment(img, [(20.0, 60.0), (240.0, 60.0)])
+    assert distance_to(cl.points_px, main).max() < 1.0
