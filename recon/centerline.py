@@ -99,6 +99,9 @@ _PROVISIONAL_POWER = 0.0
 #: A point is off the vessel where the response is below this fraction of the
 #: trace's median response.
 _OFF_VESSEL = 0.3
+#: ... or where its fitted radius exceeds this many times the trace's median radius
+#: while its attenuation is below _OFF_VESSEL of the median (a shallow wide shadow).
+_DIFFUSE_RADIUS = 1.6
 
 
 # -------------------------------------------------------------------- helpers
@@ -505,8 +508,8 @@ def trace_segment(
     at = np.argmin(d, axis=1)
     at[0], at[-1] = 0, len(points) - 1
     at = np.maximum.accumulate(at)
-    mass = fit2.depth * np.nan_to_num(fit2.radius_px, nan=0.0) ** 2  # ~ integrated absorption
-    _check_trace(vmap, points, radius, mass, at, view)
+    _check_trace(vmap, points, radius, fit2.depth, np.nan_to_num(fit2.radius_px, nan=0.0), at,
+                 view)
     reason = "; ".join([mapping.reason, *notes])
     return Centerline2D(
         points_px=points,
@@ -522,19 +525,28 @@ def trace_segment(
 
 
 def _check_trace(vmap: VesselnessMap, points: FloatArray, radius: FloatArray,
-                 mass: FloatArray, click_at: NDArray[np.int64], view: str) -> None:
+                 depth: FloatArray, fit_radius: FloatArray, click_at: NDArray[np.int64],
+                 view: str) -> None:
     """Refuse a trace that leaves the vessel, doubles back or runs over itself.
 
-    A point is off the vessel where both the ridge measure and the fitted profile's
-    mass (attenuation x radius^2, ~ the integrated absorption across) are below
-    :data:`_OFF_VESSEL` of their medians along the trace (a crossing's centre has a
-    weak ridge but a heavy profile; a gap has neither).
+    ``depth`` (N,) and ``fit_radius`` (N,) are each point's fitted attenuation and
+    radius. A point is off the vessel where both the ridge measure and the fitted
+    profile's mass (attenuation x radius^2, ~ the integrated absorption across)
+    are below :data:`_OFF_VESSEL` of their medians along the trace (a crossing's
+    centre has a weak ridge but a heavy profile; a gap has neither), or where the
+    profile is a shallow wide shadow: attenuation below :data:`_OFF_VESSEL` and
+    radius above :data:`_DIFFUSE_RADIUS` times their medians (the contrast-invariant
+    ridge also answers on a faint background structure; a vessel whose contrast
+    fades keeps its calibre).
     """
     ridge = vmap.response if vmap.ridge is None else vmap.ridge
     resp = ndi.map_coordinates(ridge, [points[:, 1], points[:, 0]], order=1,
                                mode="nearest")
+    mass = depth * fit_radius**2
     deep = mass >= _OFF_VESSEL * float(np.median(mass))
-    on_vessel = (resp >= _OFF_VESSEL * float(np.median(resp))) | deep
+    diffuse = (depth < _OFF_VESSEL * float(np.median(depth))) & \
+        (fit_radius > _DIFFUSE_RADIUS * float(np.median(fit_radius)))
+    on_vessel = ((resp >= _OFF_VESSEL * float(np.median(resp))) | deep) & ~diffuse
     problem = find_route_problem(points, radius, on_vessel)
     if problem is None:
         return

@@ -39,11 +39,13 @@ from scipy import ndimage as ndi
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import cKDTree
+from skimage.morphology import skeletonize
 
 from recon.trace_error import TraceError
 from recon.vesselness import RADIUS_PER_SIGMA, VesselnessMap
 
-__all__ = ["Route", "minimal_route", "RouteProblem", "find_route_problem", "N_HEADINGS"]
+__all__ = ["Route", "minimal_route", "loop_apices", "RouteProblem", "find_route_problem",
+           "N_HEADINGS"]
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -66,6 +68,9 @@ _SCALE_JUMP = 10.0
 #: the 16 integer moves of length 8 change the row by 0, 3, 6, 7 or 8 only).
 _MOVE_PER_RADIUS = 1.0
 _MAX_MOVE_PX = 4
+#: The route's crop reaches this fraction of the clicks' extent beyond them (a loop
+#: or a bend may lie well outside the clicks' box).
+_CROP_MARGIN = 1.0
 #: At a waypoint the heading may change by at most this many steps (90 deg).
 _WAYPOINT_TURN = 4
 
@@ -97,7 +102,7 @@ def _headings(move_px: int) -> tuple[IntArray, FloatArray]:
 def _crop_box(clicks_px: FloatArray, shape: tuple[int, int], radius_px: float) -> tuple[int, ...]:
     h, w = shape
     lo, hi = clicks_px.min(axis=0), clicks_px.max(axis=0)
-    margin = 20.0 + 0.15 * float(np.max(hi - lo)) + 3.0 * radius_px
+    margin = 20.0 + _CROP_MARGIN * float(np.max(hi - lo)) + 3.0 * radius_px
     c0, r0 = np.maximum(np.floor(lo - margin), 0).astype(int)
     c1 = int(min(np.ceil(hi[0] + margin) + 1, w))
     r1 = int(min(np.ceil(hi[1] + margin) + 1, h))
@@ -250,21 +255,27 @@ def minimal_route(
         band = np.isin(labels, keep[keep > 0])  # only the pieces the clicks are on
         graph = _Graph(band, resp, log_scale, direction, move_px, junction)
         try:
-            return _route_on(graph, local, rc, move_px, (c0, r0), view, r_ref)
+            route = _route_on(graph, local, rc, move_px, (c0, r0), view, r_ref)
         except TraceError as err:
             last_err = err
+            continue
+        lumen_px = RADIUS_PER_SIGMA * np.exp(log_scale)
+        return _round_loops(route, graph, band, lumen_px, local, move_px, (c0, r0), view, r_ref)
     assert last_err is not None
     raise last_err
 
 
 def _route_on(graph: _Graph, local: FloatArray, rc: list[tuple[int, int]], move_px: int,
-              origin: tuple[int, int], view: str, radius_px: float) -> Route:
+              origin: tuple[int, int], view: str, radius_px: float,
+              no_fold: frozenset[int] = frozenset()) -> Route:
+    """The route through the clicks ``local`` (K, 2) in order; at the waypoints whose
+    indices are in ``no_fold`` the route may not turn by more than 90 degrees."""
     pieces = [local[:1]]
     click_index = [0]
     headings = np.arange(N_HEADINGS)
     for i in range(len(local) - 1):
         chain, last = graph.solve(rc[i], headings, rc[i + 1], reach_px=float(move_px))
-        if chain is None and i > 0:
+        if chain is None and i > 0 and i not in no_fold:
             # Reachable only by turning at the waypoint: a vessel that folds back in
             # projection (foreshortened) turns there too, so the turn is allowed; clicks
             # out of order show as a route that runs back over itself (checked below).
@@ -303,17 +314,167 @@ def _route_on(graph: _Graph, local: FloatArray, rc: list[tuple[int, int]], move_
                  move_px=move_px)
 
 
+def loop_apices(band: NDArray[np.bool_], path_px: FloatArray, radius_px: float,
+                lumen_px: FloatArray | None = None) -> list[tuple[int, FloatArray]]:
+    """Loops of the vessel that a route (M, 2) cut across, in a band's pixels (col, row).
+
+    A loop that overlaps itself in projection is a ring of ridge touching the route
+    at its crossing: the band's skeleton (Zhang & Suen's thinning, scikit-image)
+    outside a tube of 2.5 r + 3 px around the route (past the crossing's blob) has
+    a piece that meets the tube in two places less than max(6 r, 30) px of route
+    apart, joined through the piece by a skeleton path longer than twice that
+    stretch of route plus 2 r that reaches farther than 2.5 r from the route, away
+    from the route's ends, and along which the lumen (``lumen_px``: radius map
+    (H, W) of the band's pixels, if given) is at least 0.7 r: a vessel keeps its
+    calibre round a loop. (A branch meets the tube once; a vessel crossing the
+    route leaves two pieces that meet it once each; two branches that meet make
+    a ring of thinner vessels.)
+
+    Returns (route index of the crossing, the loop's apex (2,): the middle of that
+    skeleton path), in route order.
+    """
+    h, w = band.shape
+    on_route = np.zeros((h, w), dtype=bool)
+    rc = np.rint(path_px[:, ::-1]).astype(int)
+    inside = (rc[:, 0] >= 0) & (rc[:, 0] < h) & (rc[:, 1] >= 0) & (rc[:, 1] < w)
+    on_route[rc[inside, 0], rc[inside, 1]] = True
+    dist = ndi.distance_transform_edt(~on_route)
+    tube_px = 2.5 * radius_px + 3.0
+    pieces = skeletonize(band) & (dist > tube_px)
+    labels, n = ndi.label(pieces, structure=np.ones((3, 3)))
+    if n == 0:
+        return []
+    s_route = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(path_px, axis=0),
+                                                              axis=1))])
+    tree = cKDTree(path_px)
+    max_span = max(6.0 * radius_px, 30.0)
+    found: list[tuple[int, FloatArray]] = []
+    sizes = np.bincount(labels.ravel())
+    for k in np.nonzero(sizes >= max(3.0 * radius_px, 12.0))[0]:
+        if k == 0:
+            continue
+        rows, cols = np.nonzero(labels == k)
+        touch = dist[rows, cols] <= tube_px + 2.0
+        if np.count_nonzero(touch) < 2:
+            continue
+        path = _contact_path(rows, cols, touch)
+        if path is None:
+            continue
+        pr, pc = rows[path], cols[path]
+        if dist[pr, pc].max() < 2.5 * radius_px:
+            continue
+        if lumen_px is not None and float(np.median(lumen_px[pr, pc])) < 0.7 * radius_px:
+            continue
+        _, at = tree.query(np.column_stack([cols[touch], rows[touch]]).astype(float))
+        s_at = s_route[at]
+        if s_at.min() < tube_px + 2.0 or s_at.max() > s_route[-1] - tube_px - 2.0:
+            continue  # the vessel going on past an end click, round the tube's end
+        span = float(s_at.max() - s_at.min())
+        length = float(np.sum(np.hypot(np.diff(pr), np.diff(pc))))
+        if span > max_span or length < 2.0 * span + 2.0 * radius_px:
+            continue
+        mid = path[len(path) // 2]
+        found.append((int(np.median(at)), np.array([cols[mid], rows[mid]], dtype=float)))
+    return sorted(found, key=lambda item: item[0])
+
+
+def _contact_path(rows: IntArray, cols: IntArray, touch: NDArray[np.bool_]) -> IntArray | None:
+    """Indices (into rows/cols) of the skeleton path (8-connected) between the two pixels
+    touching the tube that lie farthest apart along a skeleton piece; None if the
+    piece touches the tube in one place only (no two such pixels 4 px apart)."""
+    pts = np.column_stack([rows, cols]).astype(float)
+    pairs = cKDTree(pts).query_pairs(1.5, output_type="ndarray")
+    if not len(pairs):
+        return None
+    wt = np.hypot(*(pts[pairs[:, 0]] - pts[pairs[:, 1]]).T)
+    n = len(pts)
+    graph = csr_matrix((wt, (pairs[:, 0], pairs[:, 1])), shape=(n, n))
+    ends = np.nonzero(touch)[0]
+    dist, pred = dijkstra(graph, directed=False, indices=ends, return_predecessors=True)
+    between = np.where(np.isfinite(dist[:, ends]), dist[:, ends], -1.0)
+    i, j = np.unravel_index(np.argmax(between), between.shape)
+    if between[i, j] < 4.0:
+        return None
+    chain = [int(ends[j])]
+    while chain[-1] != ends[i]:
+        chain.append(int(pred[i, chain[-1]]))
+    return np.asarray(chain[::-1], dtype=np.int64)
+
+
+def _round_loops(route: Route, graph: _Graph, band: NDArray[np.bool_], lumen_px: FloatArray,
+                 local: FloatArray, move_px: int, origin: tuple[int, int], view: str,
+                 radius_px: float) -> Route:
+    """The route with every loop it cut across (:func:`loop_apices`) followed round: the
+    loops' apices become waypoints that the route passes without turning back; the
+    route without them is kept if that fails, if the new route doubles back or runs
+    over itself (:func:`find_route_problem`), or if it runs back along itself (then it
+    went into a branch and back)."""
+    o = np.asarray(origin, float)
+    loops = loop_apices(band, route.path_px - o, radius_px, lumen_px)
+    if not loops:
+        return route
+    clicks = [p for p in local]
+    is_click = [True] * len(local)
+    for index, apex in reversed(loops):  # after the click before the crossing
+        seg = int(np.searchsorted(route.click_index, index, side="right") - 1)
+        seg = int(np.clip(seg, 0, len(local) - 2))
+        insert = seg + 1 + sum(not c for c in is_click[: seg + 1])
+        clicks.insert(insert, apex)
+        is_click.insert(insert, False)
+    pts = np.array(clicks)
+    rc = [(int(p[1]), int(p[0])) for p in np.rint(pts)]
+    keep = np.asarray(is_click, dtype=bool)
+    try:
+        looped = _route_on(graph, pts, rc, move_px, origin, view, radius_px,
+                           no_fold=frozenset(np.nonzero(~keep)[0].tolist()))
+    except TraceError:
+        return route
+    path = looped.path_px
+    if find_route_problem(path, np.full(len(path), radius_px), np.ones(len(path), bool)):
+        return route
+    if _retraces(path, radius_px):
+        return route  # a detour into a branch and back, not a loop
+    return Route(path_px=looped.path_px, click_index=looped.click_index[keep],
+                 move_px=looped.move_px)
+
+
+def _retraces(path_px: FloatArray, radius_px: float) -> bool:
+    """Whether a route (M, 2), about 1 px apart, runs back along itself: more than
+    4 r + 4 px of it lies within 2 r of a part of it more than 2 r + 4 px of route
+    away, heading the opposite way (into a branch and back; a loop's second pass
+    crosses its first at an angle)."""
+    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(path_px, axis=0), axis=1))])
+    pairs = cKDTree(path_px).query_pairs(max(2.0 * radius_px, 1.5), output_type="ndarray")
+    if not len(pairs):
+        return False
+    i, j = pairs[:, 0], pairs[:, 1]
+    t = np.gradient(path_px, axis=0)
+    t /= np.maximum(np.linalg.norm(t, axis=1, keepdims=True), 1e-12)
+    back = (np.abs(s[j] - s[i]) > 2.0 * radius_px + 4.0) & \
+        (np.einsum("ij,ij->i", t[i], t[j]) < -0.7)
+    marked = np.zeros(len(path_px), dtype=bool)
+    marked[i[back]] = True
+    step = float(np.median(np.diff(s))) if len(s) > 1 else 1.0
+    return any((b - a) * step > 4.0 * radius_px + 4.0 for a, b in _runs(marked))
+
+
 def _turns_back(before: FloatArray, after: FloatArray, radius_px: float) -> bool:
-    """Whether the route after a waypoint (M, 2) runs back over the route before it
+    """Whether the route after a waypoint (M, 2) runs back along the route before it
     (N, 2): more than max(3 r, 6) px of it, beyond 2 r + 4 px of the waypoint, lies
-    within max(1.5, r) px of the earlier route."""
+    within max(1.5, r) px of the earlier route heading the opposite way (a loop's
+    second pass crosses its first, it does not retrace it)."""
     lead = np.cumsum(np.r_[0.0, np.linalg.norm(np.diff(after, axis=0), axis=1)])
     far = lead > 2.0 * radius_px + 4.0
-    if not np.any(far):
+    if not np.any(far) or len(before) < 2:
         return False
-    d, _ = cKDTree(before).query(after[far])
+    d, j = cKDTree(before).query(after[far])
+    t_before = np.gradient(before, axis=0)
+    t_after = np.gradient(after, axis=0)[far] if len(after) > 1 else np.zeros((1, 2))
+    cos = np.einsum("ij,ij->i", t_after, t_before[j]) / np.maximum(
+        np.linalg.norm(t_after, axis=1) * np.linalg.norm(t_before[j], axis=1), 1e-12)
+    back = (d <= max(1.5, radius_px)) & (cos < -0.5)
     step = float(np.median(np.diff(lead))) if len(lead) > 1 else 1.0
-    return float(np.count_nonzero(d <= max(1.5, radius_px))) * step > max(3 * radius_px, 6.0)
+    return float(np.count_nonzero(back)) * step > max(3 * radius_px, 6.0)
 
 
 # ------------------------------------------------------------------- checks

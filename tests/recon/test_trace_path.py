@@ -101,8 +101,6 @@ def test_route_problems_on_drawn_curves() -> None:
     assert find_route_problem(loop, np.full(len(loop), 2.0), np.ones(len(loop), bool)) is None
 
 
-@pytest.mark.xfail(strict=True, reason="a loop whose crossing the route can round inside the "
-                   "overlap of its two passes is still cut across (see the report)")
 def test_a_loop_is_followed_round_not_cut_at_its_crossing() -> None:
     t = np.linspace(-2.9, 2.9, 6000)
     loop = np.column_stack([150 + 20 * t - 45 * np.sin(t), 80 + 45 * np.cos(t)])
