@@ -8,6 +8,7 @@ code 2. Set CORONARY3D_DEBUG=1 to see the traceback instead.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import sys
@@ -110,7 +111,8 @@ def build_parser() -> argparse.ArgumentParser:
         description="Load two angiograms, trace the segment clicked in seeds.json in each "
         "view, calibrate view B (PALM), match points (CBOCD + dynamic programming), "
         "triangulate, build the surface and measure the narrowing. Writes "
-        "DIR/centerline.csv, DIR/mesh.stl (or --format) and DIR/report.json.",
+        "DIR/centerline.csv, DIR/centerline.vtp, DIR/mesh.stl (or --format) and "
+        "DIR/report.json; with --sr also DIR/measurements-sr.dcm.",
     )
     p.add_argument("file_a", nargs="?", metavar="A", help="reference view (DICOM or PNG/TIFF)")
     p.add_argument("file_b", nargs="?", metavar="B", help="second view")
@@ -139,6 +141,12 @@ def build_parser() -> argparse.ArgumentParser:
             "X-ray intensity), log (linear in attenuation) or auto (its "
             "PixelIntensityRelationship tag when LIN/LOG, else estimated); default auto",
         )
+    p.add_argument(
+        "--sr",
+        action="store_true",
+        help="also write measurements-sr.dcm, a DICOM Structured Report (TID 1500) of the "
+        "measurements in the inputs' patient and study (DICOM inputs only)",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress on stderr")
     _add_geometry_options(p)
 
@@ -271,8 +279,16 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
 
     overrides = _overrides(args)
     t0 = time.perf_counter()
+    sr_sources = None
+    if args.sr:  # refused before any work when the inputs cannot carry an SR
+        from recon.io.sr import read_sr_sources
+
+        sr_sources = read_sr_sources(file_a, file_b)
     angio_a = load_angiogram(file_a, frame=args.frame_a, overrides=overrides)
     angio_b = load_angiogram(file_b, frame=args.frame_b, overrides=overrides)
+    if sr_sources is not None:
+        frames = (angio_a.frame_index + 1, angio_b.frame_index + 1)
+        sr_sources = dataclasses.replace(sr_sources, frame_numbers=frames)
     seeds = load_seeds(seeds_path)
     options = ReconstructionOptions(
         matcher=args.matcher,
@@ -283,7 +299,7 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
         intensity_b=args.intensity_b,
     )
     rec = reconstruct_pair(angio_a, angio_b, seeds, options, progress=progress)
-    written = write_outputs(rec, Path(args.out), formats=formats)
+    written = write_outputs(rec, Path(args.out), formats=formats, sr_sources=sr_sources)
     for line in rec.warnings:  # shown even with --quiet: they qualify the numbers
         print(f"coronary3d: warning: {line}", file=sys.stderr)
     if not args.quiet:
