@@ -115,8 +115,13 @@ class SRSources:
     frame_numbers: tuple[int | None, int | None] = (None, None)
 
 
-def read_sr_sources(path_a: str | os.PathLike, path_b: str | os.PathLike) -> SRSources:
-    """The headers an SR of this pair needs; checked before any work is done.
+def read_sr_sources(
+    path_a: str | os.PathLike,
+    path_b: str | os.PathLike,
+    frame_numbers: tuple[int | None, int | None] = (None, None),
+) -> SRSources:
+    """The headers an SR of this pair needs (checked before the reconstruction runs), and
+    the 1-based frames used of each view.
 
     Raises :class:`OutputError` with one line naming the file when an input
     is an image file (no patient or study to copy), not readable DICOM,
@@ -146,7 +151,13 @@ def read_sr_sources(path_a: str | os.PathLike, path_b: str | os.PathLike) -> SRS
             f"{os.fspath(path_b)}: --sr: the two views name different patients "
             "(PatientID or PatientName differ from view A's)"
         )
-    return SRSources(header_a=a, header_b=b, path_a=os.fspath(path_a), path_b=os.fspath(path_b))
+    return SRSources(
+        header_a=a,
+        header_b=b,
+        path_a=os.fspath(path_a),
+        path_b=os.fspath(path_b),
+        frame_numbers=frame_numbers,
+    )
 
 
 def measurement_report_sr(report: dict, sources: SRSources) -> bytes:
