@@ -214,6 +214,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="reconstruct only: N more runs per case with every click moved up to 2 px; "
         "reports the spread of MLD, %%DS and the MLD site",
     )
+    p.add_argument(
+        "--workers",
+        type=int,
+        metavar="N",
+        help="reconstruct, regular suite: run the cases on a local Dask cluster of N "
+        "worker processes (the engine of `coronary3d batch`)",
+    )
     return parser
 
 
@@ -438,6 +445,12 @@ def cmd_bench(args: argparse.Namespace) -> int:
                   file=sys.stderr)
             return EXIT_USER_ERROR
         extra["jitter"] = args.jitter
+    if args.workers is not None:
+        if args.name != "reconstruct" or args.suite != "regular" or args.workers < 1:
+            print("coronary3d: error: --workers N (N >= 1) is for bench reconstruct "
+                  "(regular suite)", file=sys.stderr)
+            return EXIT_USER_ERROR
+        extra["workers"] = args.workers
     result = module.run(cases=args.cases, seed=args.seed, **extra)
     print(module.format_table(result))
     if args.json:
