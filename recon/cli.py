@@ -1,4 +1,4 @@
-"""The `coronary3d` command line: info, phantom, reconstruct, view, bench.
+"""The `coronary3d` command line: info, phantom, reconstruct, batch, view, bench.
 
 Every user mistake (a bad file, a missing tag, a click off the vessel) ends
 in one line on stderr naming the file or click and what is wrong, and exit
@@ -110,7 +110,8 @@ def build_parser() -> argparse.ArgumentParser:
         description="Load two angiograms, trace the segment clicked in seeds.json in each "
         "view, calibrate view B (PALM), match points (CBOCD + dynamic programming), "
         "triangulate, build the surface and measure the narrowing. Writes "
-        "DIR/centerline.csv, DIR/mesh.stl (or --format) and DIR/report.json.",
+        "DIR/centerline.csv, DIR/centerline.vtp, DIR/mesh.stl (or --format) and "
+        "DIR/report.json; with --sr also DIR/measurements-sr.dcm.",
     )
     p.add_argument("file_a", nargs="?", metavar="A", help="reference view (DICOM or PNG/TIFF)")
     p.add_argument("file_b", nargs="?", metavar="B", help="second view")
@@ -139,8 +140,36 @@ def build_parser() -> argparse.ArgumentParser:
             "X-ray intensity), log (linear in attenuation) or auto (its "
             "PixelIntensityRelationship tag when LIN/LOG, else estimated); default auto",
         )
+    p.add_argument(
+        "--sr",
+        action="store_true",
+        help="also write measurements-sr.dcm, a DICOM Structured Report (TID 1500) of the "
+        "measurements in the inputs' patient and study (DICOM inputs only)",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress on stderr")
     _add_geometry_options(p)
+
+    p = sub.add_parser(
+        "batch",
+        help="reconstruct every case of a manifest CSV on Dask (local or a cluster)",
+        description="Reconstruct one case per manifest row (header id,a,b,seeds, optional "
+        "columns geometry_a, geometry_b, frame_a, frame_b, segment, matcher, optimizer, "
+        "intensity_a, intensity_b, self_calibration; paths relative to the manifest) into "
+        "DIR/<id>/, on a local Dask cluster or an existing one (--scheduler). A failed case "
+        "is recorded with its error and the others go on; a rerun skips the recorded cases. "
+        "DIR/results.csv (and results.parquet with the [batch] extra) has one row per case.",
+    )
+    p.add_argument("manifest", metavar="MANIFEST.csv")
+    p.add_argument("--out", required=True, metavar="DIR", help="output folder")
+    p.add_argument("--workers", type=int, default=1, metavar="N",
+                   help="local worker processes (default 1; ignored with --scheduler)")
+    p.add_argument("--scheduler", metavar="ADDRESS",
+                   help="an existing Dask scheduler, e.g. tcp://10.0.0.5:8786")
+    p.add_argument("--retry-failed", action="store_true", help="run the failed cases again")
+    p.add_argument("--format", default="stl", help="mesh formats, comma separated: stl,obj,ply,glb")
+    p.add_argument("--sr", action="store_true",
+                   help="also write measurements-sr.dcm per case (DICOM inputs only)")
+    p.add_argument("--quiet", action="store_true", help="no progress on stderr")
 
     p = sub.add_parser(
         "view",
@@ -184,6 +213,13 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="N",
         help="reconstruct only: N more runs per case with every click moved up to 2 px; "
         "reports the spread of MLD, %%DS and the MLD site",
+    )
+    p.add_argument(
+        "--workers",
+        type=int,
+        metavar="N",
+        help="reconstruct, regular suite: run the cases on a local Dask cluster of N "
+        "worker processes (the engine of `coronary3d batch`)",
     )
     return parser
 
@@ -238,7 +274,7 @@ def cmd_phantom(args: argparse.Namespace) -> int:
 def cmd_reconstruct(args: argparse.Namespace) -> int:
     from recon.io.angiogram import load_angiogram
     from recon.io.demo import demo_paths
-    from recon.io.outputs import MESH_FORMATS, write_outputs
+    from recon.io.outputs import write_outputs
     from recon.io.seeds_file import load_seeds
     from recon.pipeline import ReconstructionOptions, reconstruct_pair
 
@@ -256,13 +292,8 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
                 file=sys.stderr,
             )
             return EXIT_USER_ERROR
-    formats = tuple(f.strip().lower() for f in args.format.split(",") if f.strip())
-    bad = [f for f in formats if f not in MESH_FORMATS]
-    if bad or not formats:
-        print(
-            f"coronary3d: error: --format {args.format!r}: choose from {', '.join(MESH_FORMATS)}",
-            file=sys.stderr,
-        )
+    formats = _mesh_formats(args.format)
+    if formats is None:
         return EXIT_USER_ERROR
 
     def progress(stage: str, fraction: float) -> None:
@@ -273,6 +304,12 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     angio_a = load_angiogram(file_a, frame=args.frame_a, overrides=overrides)
     angio_b = load_angiogram(file_b, frame=args.frame_b, overrides=overrides)
+    sr_sources = None
+    if args.sr:  # refused before the reconstruction when the inputs cannot carry an SR
+        from recon.io.sr import read_sr_sources
+
+        frames = (angio_a.frame_index + 1, angio_b.frame_index + 1)
+        sr_sources = read_sr_sources(file_a, file_b, frames)
     seeds = load_seeds(seeds_path)
     options = ReconstructionOptions(
         matcher=args.matcher,
@@ -283,7 +320,7 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
         intensity_b=args.intensity_b,
     )
     rec = reconstruct_pair(angio_a, angio_b, seeds, options, progress=progress)
-    written = write_outputs(rec, Path(args.out), formats=formats)
+    written = write_outputs(rec, Path(args.out), formats=formats, sr_sources=sr_sources)
     for line in rec.warnings:  # shown even with --quiet: they qualify the numbers
         print(f"coronary3d: warning: {line}", file=sys.stderr)
     if not args.quiet:
@@ -295,6 +332,76 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
     for path in written:
+        print(path)
+    return 0
+
+
+def _mesh_formats(text: str) -> tuple[str, ...] | None:
+    """The --format list, or None (after one error line) when it names an unknown format."""
+    from recon.io.outputs import MESH_FORMATS
+
+    formats = tuple(f.strip().lower() for f in text.split(",") if f.strip())
+    if not formats or any(f not in MESH_FORMATS for f in formats):
+        print(f"coronary3d: error: --format {text!r}: choose from {', '.join(MESH_FORMATS)}",
+              file=sys.stderr)
+        return None
+    return formats
+
+
+def cmd_batch(args: argparse.Namespace) -> int:
+    from recon.io.engine import run_batch
+    from recon.io.manifest import read_manifest
+
+    formats = _mesh_formats(args.format)
+    if formats is None:
+        return EXIT_USER_ERROR
+    if args.workers < 1:
+        print(f"coronary3d: error: --workers {args.workers}: give at least 1", file=sys.stderr)
+        return EXIT_USER_ERROR
+    cases = read_manifest(args.manifest)
+    tty = sys.stderr.isatty()
+
+    def on_start(summary, n_to_run: int) -> None:
+        if args.quiet:
+            return
+        where = args.scheduler or f"a local cluster of {args.workers} worker(s)"
+        print(f"{len(cases)} case(s): {summary.skipped} already recorded, {n_to_run} to run "
+              f"on {where}", file=sys.stderr)
+        if n_to_run:
+            dashboard = summary.dashboard or "not available (install coronary3d[batch])"
+            print(f"Dask dashboard: {dashboard}", file=sys.stderr)
+
+    def on_case(record: dict, completed: int, total: int) -> None:
+        if args.quiet:
+            return
+        width = 30
+        filled = round(width * completed / total)
+        bar = f"[{'#' * filled}{'.' * (width - filled)}] {completed}/{total}"
+        if tty:
+            end = "\n" if completed == total else ""
+            print(f"\r{bar} {record['id']}: {record['status']}\033[K", end=end, file=sys.stderr,
+                  flush=True)
+        else:
+            print(f"{bar} {record['id']}: {record['status']}", file=sys.stderr, flush=True)
+
+    summary = run_batch(
+        cases,
+        Path(args.out),
+        formats=formats,
+        sr=args.sr,
+        workers=args.workers,
+        scheduler=args.scheduler,
+        retry_failed=args.retry_failed,
+        on_start=on_start,
+        on_case=on_case,
+    )
+    if not args.quiet:
+        for record in summary.records:
+            if record["status"] == "failed":
+                print(f"coronary3d: failed: {record['id']}: {record['error']}", file=sys.stderr)
+        print(f"{summary.done} done, {summary.failed} failed ({summary.run} run now, "
+              f"{summary.skipped} skipped)", file=sys.stderr)
+    for path in summary.tables:
         print(path)
     return 0
 
@@ -338,6 +445,12 @@ def cmd_bench(args: argparse.Namespace) -> int:
                   file=sys.stderr)
             return EXIT_USER_ERROR
         extra["jitter"] = args.jitter
+    if args.workers is not None:
+        if args.name != "reconstruct" or args.suite != "regular" or args.workers < 1:
+            print("coronary3d: error: --workers N (N >= 1) is for bench reconstruct "
+                  "(regular suite)", file=sys.stderr)
+            return EXIT_USER_ERROR
+        extra["workers"] = args.workers
     result = module.run(cases=args.cases, seed=args.seed, **extra)
     print(module.format_table(result))
     if args.json:
@@ -354,6 +467,7 @@ COMMANDS = {
     "info": cmd_info,
     "phantom": cmd_phantom,
     "reconstruct": cmd_reconstruct,
+    "batch": cmd_batch,
     "view": cmd_view,
     "bench": cmd_bench,
 }

@@ -2,9 +2,39 @@
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
+from pathlib import Path
+
 import numpy as np
 
 from recon.types import Centerline3D
+
+DATA = Path(__file__).resolve().parent / "data"  # real DICOMs (ORIGIN.md)
+DEMO = Path(__file__).resolve().parents[1] / "assets" / "demo"  # the bundled demo pair
+
+
+def run_cli(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
+    env = {k: v for k, v in os.environ.items() if k != "CORONARY3D_DEBUG"}
+    return subprocess.run(
+        [sys.executable, "-m", "recon.cli", *args],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        cwd=cwd,
+        env=env,
+    )
+
+
+def assert_one_line_error(proc: subprocess.CompletedProcess, *fragments: str) -> None:
+    assert proc.returncode == 2, proc.stderr
+    assert "Traceback" not in proc.stderr
+    lines = [line for line in proc.stderr.splitlines() if line.startswith("coronary3d: error:")]
+    assert len(lines) == 1, proc.stderr  # one error line (progress lines may precede it)
+    for fragment in fragments:
+        assert fragment in lines[0]
+
 
 #: A seeds.json document of version 1 with one segment and one feature.
 EXAMPLE_SEEDS = {

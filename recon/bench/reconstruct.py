@@ -181,21 +181,23 @@ def _case_row(case: PhantomCase, rec, wall_ms: float) -> dict:
 
 
 def run(cases: int | None = None, seed: int = 0, suite: str = "regular",
-        jitter: int = 0) -> dict:
+        jitter: int = 0, workers: int | None = None) -> dict:
     """Run the end-to-end benchmark on ``cases`` phantom cases; medians and rows.
 
     ``cases`` None means :data:`CASES`; case k is preset ``PRESET_CYCLE[k % 4]``
     with seed ``seed + k``. ``suite="varied"``: ``cases`` per imaging chain
     (None: 8), figures per chain and overall (module docstring). ``jitter``:
     that many extra runs per case with jittered clicks, reported under
-    "stability".
+    "stability". ``workers``: the regular suite's cases run as tasks on a
+    local Dask cluster of that many processes (the engine of `coronary3d
+    batch`); None runs them one after another in this process.
     """
     check_suite(suite)
     if jitter < 0:
         raise ValueError(f"jitter must be >= 0, got {jitter}")
     if suite == "varied":
         return _run_varied(VARIED_CASES_PER_CHAIN if cases is None else cases, seed, jitter)
-    result = _run_regular(cases, seed)
+    result = _run_regular(cases, seed, workers)
     if jitter:
         cases = CASES if cases is None else cases
         jobs = [(("regular", PRESET_CYCLE[k % len(PRESET_CYCLE)], seed + k), jitter)
@@ -205,20 +207,30 @@ def run(cases: int | None = None, seed: int = 0, suite: str = "regular",
     return result
 
 
-def _run_regular(cases: int | None, seed: int) -> dict:
+def _regular_case(job: tuple[str, int]) -> tuple[dict | None, dict | None]:
+    """One regular-suite case: (row, None), or (None, failure) (runs in a worker)."""
+    preset, case_seed = job
+    case = make_phantom(preset, case_seed, stenosis_pct=STENOSIS_PCT)
+    try:
+        return evaluate_case(case, ReconstructionOptions(self_calibration=SELF_CALIBRATION)), None
+    except ValueError as err:  # a failed case is a result, not a crash of the bench
+        return None, {"preset": preset, "seed": case_seed, "error": str(err)}
+
+
+def _run_regular(cases: int | None, seed: int, workers: int | None = None) -> dict:
     cases = CASES if cases is None else cases
-    stenosis_pct = STENOSIS_PCT
     self_calibration = SELF_CALIBRATION
-    options = ReconstructionOptions(self_calibration=self_calibration)
-    rows = []
-    failures = []
-    for k in range(cases):
-        preset = PRESET_CYCLE[k % len(PRESET_CYCLE)]
-        case = make_phantom(preset, seed + k, stenosis_pct=stenosis_pct)
-        try:
-            rows.append(evaluate_case(case, options))
-        except ValueError as err:  # a failed case is a result, not a crash of the bench
-            failures.append({"preset": preset, "seed": seed + k, "error": str(err)})
+    jobs = [(PRESET_CYCLE[k % len(PRESET_CYCLE)], seed + k) for k in range(cases)]
+    t0 = time.perf_counter()
+    if workers is None:
+        outcomes = [_regular_case(job) for job in jobs]
+    else:
+        from recon.io.engine import map_ordered
+
+        outcomes = map_ordered(_regular_case, jobs, workers=workers)
+    elapsed_s = time.perf_counter() - t0
+    rows = [row for row, _ in outcomes if row is not None]
+    failures = [failure for _, failure in outcomes if failure is not None]
     if not rows:
         raise ValueError(f"bench reconstruct: all {cases} cases failed, first: {failures[0]}")
 
@@ -247,6 +259,8 @@ def _run_regular(cases: int | None, seed: int) -> dict:
                      for r in rows])
         ),
         "median_pipeline_ms": med("wall_ms"),
+        "workers": workers,
+        "cases_per_minute": 60.0 * cases / elapsed_s,
         "median_stage_ms": {
             s: float(np.median([r["timings_ms"].get(s, 0.0) for r in rows])) for s in stages
         },
@@ -294,6 +308,11 @@ def format_table(result: dict) -> str:
         + ", ".join(f"{k} {v:.0f}" for k, v in result["median_stage_ms"].items()),
         f"failed cases                    {len(result.get('failures', []))}",
     ]
+    if result.get("cases_per_minute") is not None:
+        where = (f"{result['workers']} Dask worker(s)" if result.get("workers")
+                 else "one process")
+        lines.append(f"throughput                      {result['cases_per_minute']:.1f} "
+                     f"cases per minute on {where}")
     if result.get("stability"):
         lines += _format_stability(result["stability"])
     return "\n".join(lines)

@@ -2,7 +2,8 @@
 
 Reading angiograms (XA DICOM, or an image file with a geometry JSON),
 geometry overrides, frame choice, seeds.json, the output files (centerline
-CSV, report JSON, meshes), the phantom's case files and the bundled demo.
+CSV and VTP, report JSON, meshes, DICOM SR), batch runs on Dask, the
+phantom's case files and the bundled demo.
 Everything else in ``recon`` takes and returns arrays and dataclasses.
 
 Names are re-exported here and loaded on first use, so that importing
@@ -34,6 +35,13 @@ _EXPORTS = {
     "centerline_csv": "recon.io.outputs",
     "outputs_as_bytes": "recon.io.outputs",
     "write_outputs": "recon.io.outputs",
+    "centerline_vtp": "recon.io.outputs",
+    "read_sr_sources": "recon.io.sr",
+    "measurement_report_sr": "recon.io.sr",
+    # batch runs on Dask
+    "read_manifest": "recon.io.manifest",
+    "run_case": "recon.io.batch",
+    "run_batch": "recon.io.engine",
     # phantom case files
     "write_phantom_case": "recon.io.phantom_case",
     "load_truth": "recon.io.phantom_case",

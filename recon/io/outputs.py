@@ -1,9 +1,10 @@
-"""The output files of a reconstruction: centerline CSV, report JSON, meshes.
+"""The output files of a reconstruction: centerline CSV and VTP, report JSON, meshes, SR.
 
 ``outputs_as_bytes`` renders every file in memory (the viewer's downloads);
 ``write_outputs`` writes them into a folder, each file whole or not at all.
 Mesh formats are the ones of :data:`MESH_FORMATS`, the one list of the
 project (the command line's ``--format`` and the viewer's menu use it).
+The DICOM SR (:mod:`recon.io.sr`) joins the set when its sources are given.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ import trimesh
 from recon.io.files import atomic_write_bytes
 
 if TYPE_CHECKING:
+    from recon.io.sr import SRSources
     from recon.pipeline import Reconstruction
 
 __all__ = [
@@ -26,6 +28,7 @@ __all__ = [
     "CENTERLINE_COLUMNS",
     "export_mesh",
     "centerline_csv",
+    "centerline_vtp",
     "outputs_as_bytes",
     "write_outputs",
 ]
@@ -87,27 +90,52 @@ def centerline_csv(rec: Reconstruction) -> bytes:
     return buf.getvalue().encode()
 
 
-def outputs_as_bytes(rec: Reconstruction, formats: tuple[str, ...] = ("stl",)) -> dict[str, bytes]:
-    """Every output file as bytes, keyed by file name (the viewer's downloads)."""
-    files = {"centerline.csv": centerline_csv(rec)}
+def centerline_vtp(rec: Reconstruction) -> bytes:
+    """centerline.vtp: the points of centerline.csv with its radius_mm as ``Radius``."""
+    from recon.io.vtp import centerline_polydata_bytes
+
+    cl = rec.centerline_3d
+    radius_mm = np.sqrt(rec.surface.sections.area_mm2 / np.pi)
+    return centerline_polydata_bytes(cl.X_world, radius_mm, cl.s_mm)
+
+
+def outputs_as_bytes(
+    rec: Reconstruction,
+    formats: tuple[str, ...] = ("stl",),
+    sr_sources: SRSources | None = None,
+) -> dict[str, bytes]:
+    """Every output file as bytes, keyed by file name (the viewer's downloads).
+
+    With ``sr_sources`` (the two DICOM inputs' headers) the DICOM SR
+    measurements-sr.dcm is among them.
+    """
+    files = {"centerline.csv": centerline_csv(rec), "centerline.vtp": centerline_vtp(rec)}
     for fmt in formats:
         files[f"mesh.{fmt}"] = export_mesh(rec.surface.mesh, fmt)
     report = json.dumps(rec.report(), indent=2, default=_json_default)
     files["report.json"] = (report + "\n").encode()
+    if sr_sources is not None:
+        from recon.io.sr import SR_FILE_NAME, measurement_report_sr
+
+        # from the JSON text, so that the SR's values are report.json's to the digit
+        files[SR_FILE_NAME] = measurement_report_sr(json.loads(report), sr_sources)
     files["seeds.json"] = (json.dumps(rec.seeds.to_dict(), indent=2) + "\n").encode()
     return files
 
 
 def write_outputs(
-    rec: Reconstruction, out_dir: Path, formats: tuple[str, ...] = ("stl",)
+    rec: Reconstruction,
+    out_dir: Path,
+    formats: tuple[str, ...] = ("stl",),
+    sr_sources: SRSources | None = None,
 ) -> list[Path]:
     """Write the outputs into ``out_dir``; each file appears whole or not at all.
 
     Every file is rendered to bytes first, so a failure leaves no file behind.
-    Raises :class:`~recon.errors.OutputError` naming the file that cannot be
-    written.
+    ``sr_sources`` adds the DICOM SR (:func:`outputs_as_bytes`). Raises
+    :class:`~recon.errors.OutputError` naming the file that cannot be written.
     """
-    files = outputs_as_bytes(rec, formats)
+    files = outputs_as_bytes(rec, formats, sr_sources)
     files.pop("seeds.json")
     out_dir = Path(out_dir)
     written = []

@@ -3,39 +3,12 @@
 import csv
 import io
 import json
-import os
 import shutil
-import subprocess
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 import trimesh
-
-DATA = Path(__file__).resolve().parent.parent / "data"
-DEMO = Path(__file__).resolve().parents[2] / "assets" / "demo"
-
-
-def run_cli(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
-    env = {k: v for k, v in os.environ.items() if k != "CORONARY3D_DEBUG"}
-    return subprocess.run(
-        [sys.executable, "-m", "recon.cli", *args],
-        capture_output=True,
-        text=True,
-        timeout=300,
-        cwd=cwd,
-        env=env,
-    )
-
-
-def assert_one_line_error(proc: subprocess.CompletedProcess, *fragments: str) -> None:
-    assert proc.returncode == 2, proc.stderr
-    assert "Traceback" not in proc.stderr
-    lines = [line for line in proc.stderr.splitlines() if line.startswith("coronary3d: error:")]
-    assert len(lines) == 1, proc.stderr  # one error line (progress lines may precede it)
-    for fragment in fragments:
-        assert fragment in lines[0]
+from support import DATA, DEMO, assert_one_line_error, run_cli
 
 
 def test_help_lists_every_command():
@@ -106,7 +79,7 @@ def test_reconstruct_demo_writes_the_documented_files(tmp_path):
     assert proc.returncode == 0, proc.stderr
     assert "tracing" in proc.stderr  # progress on stderr
     names = sorted(p.name for p in out.iterdir())
-    assert names == ["centerline.csv", "mesh.glb", "mesh.stl", "report.json"]
+    assert names == ["centerline.csv", "centerline.vtp", "mesh.glb", "mesh.stl", "report.json"]
 
     rows = list(csv.DictReader(io.StringIO((out / "centerline.csv").read_text())))
     for column in ("s_mm", "x_mm", "y_mm", "z_mm", "radius_mm"):

@@ -121,8 +121,8 @@ def test_real_static_phantom_pair(tmp_path):
     assert mesh.is_watertight and mesh.is_winding_consistent and mesh.volume > 0
 
     paths = write_outputs(rec, tmp_path, formats=("stl", "ply"))
-    assert sorted(p.name for p in paths) == ["centerline.csv", "mesh.ply", "mesh.stl",
-                                             "report.json"]
+    assert sorted(p.name for p in paths) == ["centerline.csv", "centerline.vtp", "mesh.ply",
+                                             "mesh.stl", "report.json"]
     report = json.loads((tmp_path / "report.json").read_text())
     for key in ("overlap_a_mm", "overlap_b_mm"):  # stretches where one view's radius stood in
         for start, end in report["centerline"][key]:
@@ -131,4 +131,5 @@ def test_real_static_phantom_pair(tmp_path):
     assert loaded.is_watertight
     assert np.isclose(loaded.volume, mesh.volume, rtol=1e-3)
     files = outputs_as_bytes(rec, ("obj",))
-    assert set(files) == {"centerline.csv", "mesh.obj", "report.json", "seeds.json"}
+    assert set(files) == {"centerline.csv", "centerline.vtp", "mesh.obj", "report.json",
+                          "seeds.json"}

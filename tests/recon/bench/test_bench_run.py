@@ -15,9 +15,9 @@ BENCHES = ("centerline", "calibration", "matching", "reconstruct")
 
 
 #: Parameters after (cases, seed): the suite for the benches that take --suite varied,
-#: and the click jitter of bench reconstruct.
+#: and the click jitter and the Dask workers of bench reconstruct.
 EXTRA = {"centerline": {"suite": "regular"},
-         "reconstruct": {"suite": "regular", "jitter": 0}}
+         "reconstruct": {"suite": "regular", "jitter": 0, "workers": None}}
 
 
 @pytest.mark.parametrize("name", BENCHES)

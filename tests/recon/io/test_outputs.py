@@ -64,7 +64,9 @@ def demo_rec():
 
 def test_outputs_as_bytes_and_the_centerline_table(demo_rec):
     files = outputs_as_bytes(demo_rec, ("stl", "glb"))
-    assert set(files) == {"centerline.csv", "mesh.stl", "mesh.glb", "report.json", "seeds.json"}
+    assert set(files) == {
+        "centerline.csv", "centerline.vtp", "mesh.stl", "mesh.glb", "report.json", "seeds.json"
+    }
     assert files["centerline.csv"] == centerline_csv(demo_rec)
     lines = files["centerline.csv"].decode().splitlines()
     assert lines[0] == ",".join(CENTERLINE_COLUMNS)
@@ -77,7 +79,7 @@ def test_outputs_as_bytes_and_the_centerline_table(demo_rec):
 def test_write_outputs_writes_every_file_but_the_seeds(demo_rec, tmp_path):
     out = tmp_path / "new" / "folder"
     paths = write_outputs(demo_rec, out, formats=("stl", "obj"))
-    names = ["centerline.csv", "mesh.obj", "mesh.stl", "report.json"]
+    names = ["centerline.csv", "centerline.vtp", "mesh.obj", "mesh.stl", "report.json"]
     assert sorted(p.name for p in paths) == names
     files = outputs_as_bytes(demo_rec, ("stl", "obj"))
     for path in paths:

@@ -1,0 +1,180 @@
+"""recon.io.sr: the DICOM SR of `reconstruct --sr`, read back with highdicom, pydicom, dcmtk."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+from pathlib import Path
+
+import highdicom as hd
+import numpy as np
+import pydicom
+import pytest
+from PIL import Image
+from support import DATA, DEMO, assert_one_line_error, run_cli
+
+from recon.errors import OutputError
+from recon.io.angiogram import load_angiogram
+from recon.io.sr import SR_FILE_NAME, SR_MEASUREMENTS, measurement_report_sr, read_sr_sources
+
+# report.json key -> (code value, scheme, UCUM unit, derivation code, method code)
+EXPECTED = {
+    "mld_mm": ("397413000", "SCT", "mm", "255605001", None),
+    "reference_diameter_mm": ("397413000", "SCT", "mm", None, "122489"),
+    "diameter_stenosis_pct": ("408715008", "SCT", "%", None, None),
+    "area_stenosis_pct": ("408714007", "SCT", "%", None, None),
+    "mla_mm2": ("122480", "DCM", "mm2", "255605001", None),
+    "lesion_length_mm": ("408716009", "SCT", "mm", None, None),
+    "segment_length_mm": ("122510", "DCM", "mm", None, None),
+}
+UPPER_UNCERTAINTY, LOWER_UNCERTAINTY = "371886008", "371885007"  # SCT, TID 310
+
+
+@pytest.fixture(scope="module")
+def demo_sr(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("sr") / "demo"
+    proc = run_cli("reconstruct", "--demo", "--sr", "--quiet", "--out", str(out))
+    assert proc.returncode == 0, proc.stderr
+    return out
+
+
+def _measurements(sr: hd.sr.Comprehensive3DSR) -> list:
+    groups = sr.content.get_image_measurement_groups()
+    assert len(groups) == 1
+    return groups[0].get_measurements()
+
+
+def test_the_sr_holds_the_reports_measurements_with_their_codes(demo_sr):
+    report = json.loads((demo_sr / "report.json").read_text())
+    sr = hd.sr.srread(demo_sr / SR_FILE_NAME)
+    assert isinstance(sr, hd.sr.Comprehensive3DSR)
+    assert sr.ConceptNameCodeSequence[0].CodeValue == "126000"  # TID 1500
+    measurements = _measurements(sr)
+    assert len(measurements) == len(EXPECTED) == len(SR_MEASUREMENTS)
+    for m, (key, (code, scheme, unit, derivation, method)) in zip(
+        measurements, EXPECTED.items(), strict=True
+    ):
+        assert (m.name.value, m.name.scheme_designator) == (code, scheme), key
+        assert (m.unit.value, m.unit.scheme_designator) == (unit, "UCUM"), key
+        assert (m.derivation.value if m.derivation else None) == derivation, key
+        assert (m.method.value if m.method else None) == method, key
+        assert m.value == pytest.approx(report["measurements"][key], rel=1e-9), key
+    # no intervals in this report, so none in the SR
+    assert not _uncertainties(pydicom.dcmread(demo_sr / SR_FILE_NAME))
+
+
+def test_the_sr_references_both_views_and_copies_their_patient_and_study(demo_sr):
+    a = pydicom.dcmread(DEMO / "a.dcm", stop_before_pixels=True)
+    b = pydicom.dcmread(DEMO / "b.dcm", stop_before_pixels=True)
+    ds = pydicom.dcmread(demo_sr / SR_FILE_NAME)
+    sr = hd.sr.srread(demo_sr / SR_FILE_NAME)
+    group = sr.content.get_image_measurement_groups()[0]
+    referenced = [img.referenced_sop_instance_uid for img in group.source_images]
+    assert referenced == [a.SOPInstanceUID, b.SOPInstanceUID]
+    for keyword in ("PatientName", "PatientID", "PatientSex", "StudyInstanceUID", "StudyID",
+                    "StudyDate", "AccessionNumber"):
+        assert ds[keyword].value == a[keyword].value, keyword
+    assert ds.SeriesInstanceUID not in (a.SeriesInstanceUID, b.SeriesInstanceUID)
+    assert ds.Modality == "SR" and ds.CompletionFlag == "COMPLETE"
+    # the demo's views are two studies: A's is the SR's, B's is other evidence
+    evidence = {
+        seq.StudyInstanceUID: [s.ReferencedSOPInstanceUID for x in seq.ReferencedSeriesSequence
+                               for s in x.ReferencedSOPSequence]
+        for name in ("CurrentRequestedProcedureEvidenceSequence", "PertinentOtherEvidenceSequence")
+        for seq in ds.get(name, [])
+    }
+    assert evidence == {
+        a.StudyInstanceUID: [a.SOPInstanceUID],
+        b.StudyInstanceUID: [b.SOPInstanceUID],
+    }
+
+
+@pytest.mark.skipif(shutil.which("dsrdump") is None, reason="dcmtk's dsrdump is not installed")
+def test_dcmtk_dsrdump_parses_the_sr(demo_sr):
+    proc = subprocess.run(["dsrdump", "-Ee", str(demo_sr / SR_FILE_NAME)], capture_output=True,
+                          text=True, timeout=60)
+    assert proc.returncode == 0, proc.stderr
+    assert "Comprehensive 3D SR Document" in proc.stdout
+    assert "Lumen Diameter Stenosis" in proc.stdout
+    assert "E:" not in proc.stderr and "W:" not in proc.stderr, proc.stderr
+
+
+def test_intervals_are_written_when_the_report_has_them(demo_sr):
+    report = json.loads((demo_sr / "report.json").read_text())
+    mld = report["measurements"]["mld_mm"]
+    report["measurements_ci95"] = {"mld_mm": [mld - 0.1, mld + 0.25]}
+    sources = read_sr_sources(DEMO / "a.dcm", DEMO / "b.dcm")
+    ds = pydicom.dcmread(pydicom.filebase.DicomBytesIO(measurement_report_sr(report, sources)))
+    found = _uncertainties(ds)
+    assert sorted(found) == [LOWER_UNCERTAINTY, UPPER_UNCERTAINTY]
+    assert found[UPPER_UNCERTAINTY] == pytest.approx(0.25)
+    assert found[LOWER_UNCERTAINTY] == pytest.approx(0.1)
+
+
+def test_a_cine_frame_is_referenced_by_its_number(tmp_path):
+    out = tmp_path / "im7"
+    proc = run_cli("reconstruct", str(DATA / "IM7.dcm"), str(DATA / "IM8.dcm"), "--seeds",
+                   str(DATA / "im7_im8_seeds.json"), "--sr", "--quiet", "--out", str(out))
+    assert proc.returncode == 0, proc.stderr
+    # highdicom's person-name warning quotes the patient: nothing of it reaches stderr
+    assert "fantom" not in proc.stderr.lower()
+    report = json.loads((out / "report.json").read_text())
+    sr = hd.sr.srread(out / SR_FILE_NAME)
+    images = sr.content.get_image_measurement_groups()[0].source_images
+    chosen = [load_angiogram(DATA / name).frame_index + 1 for name in ("IM7.dcm", "IM8.dcm")]
+    assert [list(img.referenced_frame_numbers) for img in images] == [[f] for f in chosen]
+    assert _measurements(sr)[0].value == pytest.approx(report["measurements"]["mld_mm"])
+
+
+def test_image_inputs_are_refused_before_any_work(tmp_path):
+    png = tmp_path / "a.png"
+    Image.fromarray(np.full((32, 32), 200, dtype=np.uint8)).save(png)
+    (tmp_path / "a.json").write_text(json.dumps(
+        {"alpha_deg": 0, "beta_deg": 0, "sid_mm": 1000, "sod_mm": 750, "pixel_spacing_mm": 0.3}))
+    out = tmp_path / "out"
+    proc = run_cli("reconstruct", str(png), str(DEMO / "b.dcm"), "--seeds",
+                   str(DEMO / "seeds.json"), "--sr", "--out", str(out))
+    assert_one_line_error(proc, str(png), "--sr needs DICOM inputs")
+    assert "tracing" not in proc.stderr and not out.exists()
+
+
+def test_two_patients_are_refused(tmp_path):
+    b = pydicom.dcmread(DEMO / "b.dcm")
+    b.PatientID = "SOMEONE ELSE"
+    other = tmp_path / "b.dcm"
+    b.save_as(other)
+    with pytest.raises(OutputError, match=r"b\.dcm: --sr: the two views name different patients"):
+        read_sr_sources(DEMO / "a.dcm", other)
+
+
+def test_missing_patient_attributes_stay_empty_not_invented(demo_sr, tmp_path):
+    a = pydicom.dcmread(DEMO / "a.dcm")
+    del a.PatientBirthDate, a.PatientSex
+    path = tmp_path / "a.dcm"
+    a.save_as(path)
+    b = pydicom.dcmread(DEMO / "b.dcm")
+    del b.PatientBirthDate, b.PatientSex
+    path_b = tmp_path / "b.dcm"
+    b.save_as(path_b)
+    report = json.loads((demo_sr / "report.json").read_text())
+    data = measurement_report_sr(report, read_sr_sources(path, path_b))
+    ds = pydicom.dcmread(pydicom.filebase.DicomBytesIO(data))
+    assert ds.PatientBirthDate == "" and ds.PatientSex == ""
+    assert ds.PatientID == a.PatientID
+
+
+def _uncertainties(ds: pydicom.Dataset) -> dict[str, float]:
+    """Code value -> value of every measurement uncertainty item in the SR tree."""
+    found: dict[str, float] = {}
+
+    def walk(items) -> None:
+        for item in items:
+            code = item.ConceptNameCodeSequence[0].CodeValue if "ConceptNameCodeSequence" in item \
+                else None
+            if code in (UPPER_UNCERTAINTY, LOWER_UNCERTAINTY):
+                found[code] = float(item.MeasuredValueSequence[0].NumericValue)
+            walk(item.get("ContentSequence", []))
+
+    walk(ds.ContentSequence)
+    return found
