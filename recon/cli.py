@@ -141,6 +141,12 @@ def build_parser() -> argparse.ArgumentParser:
             "PixelIntensityRelationship tag when LIN/LOG, else estimated); default auto",
         )
     p.add_argument(
+        "--allow-close-views",
+        action="store_true",
+        help="go on, with a warning, when the two views are less than 25 deg apart "
+        "(refused otherwise: depth is not fixed)",
+    )
+    p.add_argument(
         "--sr",
         action="store_true",
         help="also write measurements-sr.dcm, a DICOM Structured Report (TID 1500) of the "
@@ -318,6 +324,7 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
         self_calibration=args.self_calibration,
         intensity_a=args.intensity_a,
         intensity_b=args.intensity_b,
+        allow_close_views=args.allow_close_views,
     )
     rec = reconstruct_pair(angio_a, angio_b, seeds, options, progress=progress)
     written = write_outputs(rec, Path(args.out), formats=formats, sr_sources=sr_sources)

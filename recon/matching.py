@@ -386,8 +386,13 @@ def match_centerlines(
     std = std.resample(n)
     con = con.resample(n)  # sec. 3.3.1: the constructed trace gets N points by its spline
 
-    lines = epipolar_lines(std.points_px, view_std, view_con)
-    cost = point_line_distance_px(lines, con.points_px)  # eq. (8)
+    with np.errstate(invalid="ignore", divide="ignore"):  # checked just below
+        lines = epipolar_lines(std.points_px, view_std, view_con)
+        cost = point_line_distance_px(lines, con.points_px)  # eq. (8)
+    if not np.all(np.isfinite(cost)):
+        raise MatchingError("the epipolar distances are undefined: views A and B project "
+                            "from the same place (one view paired with itself?), so no "
+                            "depth can be recovered; choose two different views")
     rows = np.arange(n)
     if method == "match1":
         j = rows.copy()

@@ -53,6 +53,12 @@ class PipelineError(CoronaryError):
     """The inputs cannot be reconstructed (one line: what and why)."""
 
 
+#: Least angle (deg) between the two views' central rays that the pipeline accepts
+#: without ``allow_close_views`` (the limit named in issue 14 of the project; the
+#: README recommends views at least this far apart).
+MIN_VIEW_SEPARATION_DEG = 25.0
+
+
 @dataclass(frozen=True)
 class ReconstructionOptions:
     """Choices a user can make; the defaults are the paper's method without self-calibration.
@@ -70,6 +76,8 @@ class ReconstructionOptions:
         attenuation) or "auto" (the file's PixelIntensityRelationship when it
         says LIN or LOG, else estimated from the image; :mod:`recon.intensity`).
     voxel_mm : surface grid size (None: chosen from the vessel radius).
+    allow_close_views : go on (with a warning) when the views' central rays are less
+        than :data:`MIN_VIEW_SEPARATION_DEG` apart; refused otherwise.
     """
 
     matcher: str = "match3"
@@ -80,6 +88,7 @@ class ReconstructionOptions:
     voxel_mm: float | None = None
     intensity_a: str = "auto"
     intensity_b: str = "auto"
+    allow_close_views: bool = False
 
 
 @dataclass(frozen=True, eq=False)
@@ -233,6 +242,7 @@ def reconstruct_pair(
     options = options or ReconstructionOptions()
     seg = _segment(seeds, options.segment)
     view_a, view_b_header = angio_a.geometry, angio_b.geometry
+    close_views = _check_separation(view_a, view_b_header, options.allow_close_views)
     timings: dict[str, float] = {}
     clock = time.perf_counter()
 
@@ -285,7 +295,7 @@ def reconstruct_pair(
     # 5b. Cross-view consistency: the 3D centerline back on both images.
     consistency = check_consistency(cl3d, view_a, cal.view_b, cl_a, cl_b,
                                     vesselness[0].response, vesselness[1].response)
-    warnings = input_warnings(angio_a.info, "A") + input_warnings(angio_b.info, "B")
+    warnings = close_views + input_warnings(angio_a.info, "A") + input_warnings(angio_b.info, "B")
     warnings += [f"view {st.view.upper()}, {st.start_mm:.1f}-{st.end_mm:.1f} mm of the 3D "
                  f"centerline: {st.reason}" for st in consistency.stretches]
     lap("consistency")
@@ -347,6 +357,28 @@ def _trace(
         relationship=relationship,
         intensity=mapping,
     )
+
+
+def _check_separation(view_a: ViewGeometry, view_b: ViewGeometry, allow: bool) -> list[str]:
+    """Refuse two views whose central rays are less than :data:`MIN_VIEW_SEPARATION_DEG`
+    apart (their epipolar lines run nearly along the vessel, so a small error in the
+    clicks or the header becomes a large error in depth); with ``allow``, the
+    warning line instead ([] when the views are far enough apart). Two views from
+    one source position are refused in any case."""
+    separation = view_separation_deg(view_a, view_b)
+    if separation >= MIN_VIEW_SEPARATION_DEG:
+        return []
+    baseline_mm = float(np.linalg.norm(view_a.source_world - view_b.source_world))
+    if baseline_mm < 1.0:
+        raise PipelineError(f"views A and B project from the same place ({baseline_mm:.2f} mm "
+                            "between their sources: one view paired with itself?), so no "
+                            "depth can be recovered; choose two different views")
+    what = (f"views A and B are {separation:.1f} deg apart (at least "
+            f"{MIN_VIEW_SEPARATION_DEG:.0f} deg needed to fix depth)")
+    if not allow:
+        raise PipelineError(f"{what}; choose two views further apart, or give "
+                            "--allow-close-views to go on anyway")
+    return [f"{what}; depth and every 3D figure are unreliable"]
 
 
 def input_warnings(info: dict, view: str) -> list[str]:

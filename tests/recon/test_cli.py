@@ -62,6 +62,22 @@ def test_reconstruct_bad_seeds_leaves_no_output(tmp_path):
     assert not out.exists() or not any(out.iterdir())
 
 
+@pytest.mark.parametrize("allow", [False, True])
+def test_reconstruct_one_view_paired_with_itself_is_refused_in_one_line(tmp_path, allow):
+    seeds = json.loads((DEMO / "seeds.json").read_text())
+    for seg in seeds["segments"]:
+        seg["b"] = seg["a"]
+    for feature in seeds["features"]:
+        feature["b"] = feature["a"]
+    path = tmp_path / "seeds.json"
+    path.write_text(json.dumps(seeds))
+    proc = run_cli("reconstruct", str(DEMO / "a.dcm"), str(DEMO / "a.dcm"), "--seeds",
+                   str(path), "--out", str(tmp_path / "out"),
+                   *(["--allow-close-views"] if allow else []))
+    assert_one_line_error(proc, "same place")
+    assert not (tmp_path / "out").exists()
+
+
 def test_reconstruct_click_off_vessel_names_the_click(tmp_path):
     seeds = json.loads((DEMO / "seeds.json").read_text())
     seeds["segments"][0]["b"][-1] = [30.0, 480.0]  # far from any vessel

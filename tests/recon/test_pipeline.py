@@ -133,3 +133,20 @@ def test_real_static_phantom_pair(tmp_path):
     files = outputs_as_bytes(rec, ("obj",))
     assert set(files) == {"centerline.csv", "centerline.vtp", "mesh.obj", "report.json",
                           "seeds.json"}
+
+
+def test_views_closer_than_25_deg_are_refused_unless_allowed() -> None:
+    from dataclasses import replace
+
+    from recon.pipeline import MIN_VIEW_SEPARATION_DEG, _check_separation
+
+    a = ViewGeometry(alpha_deg=30.0, beta_deg=0.0, sid_mm=1000.0, sod_mm=750.0,
+                     pixel_spacing_mm=(0.3, 0.3), rows=512, cols=512)
+    assert _check_separation(a, replace(a, alpha_deg=-30.0), allow=False) == []
+    close = replace(a, alpha_deg=30.0 - 0.8 * MIN_VIEW_SEPARATION_DEG)
+    with pytest.raises(PipelineError, match=r"20\.0 deg apart.*--allow-close-views"):
+        _check_separation(a, close, allow=False)
+    (line,) = _check_separation(a, close, allow=True)
+    assert "unreliable" in line
+    with pytest.raises(PipelineError, match="same place"):  # one view paired with itself
+        _check_separation(a, a, allow=True)
