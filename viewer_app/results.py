@@ -12,6 +12,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from recon.geometry import view_separation_deg
+from recon.pipeline import MIN_VIEW_SEPARATION_DEG
+
 if TYPE_CHECKING:
     from recon.calibration import CalibrationResult
     from recon.pipeline import Reconstruction
@@ -55,7 +58,8 @@ def fmt(value: object) -> str:
 
 
 def info_markdown(angio_a: Angiogram, angio_b: Angiogram, name_a: str, name_b: str) -> str:
-    """The case table: file, angles, SID / SOD, size and frame of views A and B."""
+    """The case table: file, angles, SID / SOD, size and frame of views A and B, the
+    angle between the views, and a warning when they are too close to fix depth."""
     rows = ["| | A | B |", "| --- | --- | --- |"]
     ga, gb = angio_a.geometry, angio_b.geometry
     rows.append(f"| file | {name_a} | {name_b} |")
@@ -66,6 +70,12 @@ def info_markdown(angio_a: Angiogram, angio_b: Angiogram, name_a: str, name_b: s
     rows.append(f"| size | {ga.cols}×{ga.rows} | {gb.cols}×{gb.rows} |")
     rows.append(f"| frame | {angio_a.frame_index + 1}/{angio_a.n_frames} | "
                 f"{angio_b.frame_index + 1}/{angio_b.n_frames} |")
+    separation = view_separation_deg(ga, gb)
+    rows.append(f"\nViews {separation:.0f}° apart.")
+    if separation < MIN_VIEW_SEPARATION_DEG:
+        rows.append(f"⚠ **Views too similar**: at least {MIN_VIEW_SEPARATION_DEG:.0f}° are "
+                    "needed to fix depth; Reconstruct will refuse this pair. Open two views "
+                    "further apart.")
     return "\n".join(rows)
 
 

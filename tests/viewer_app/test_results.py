@@ -34,8 +34,10 @@ def test_table_cells() -> None:
 
 
 def _angio(alpha: float, beta: float, frame: int, n_frames: int) -> SimpleNamespace:
-    geometry = SimpleNamespace(alpha_deg=alpha, beta_deg=beta, sid_mm=976.0, sod_mm=720.4,
-                               rows=512, cols=480)
+    from recon.geometry import ViewGeometry
+
+    geometry = ViewGeometry(alpha_deg=alpha, beta_deg=beta, sid_mm=976.0, sod_mm=720.4,
+                            pixel_spacing_mm=(0.3, 0.3), rows=512, cols=480)
     return SimpleNamespace(geometry=geometry, frame_index=frame, n_frames=n_frames)
 
 
@@ -49,7 +51,16 @@ def test_info_table() -> None:
         "| SID / SOD (mm) | 976 / 720 | 976 / 720 |",
         "| size | 480×512 | 480×512 |",
         "| frame | 1/1 | 4/9 |",
+        "\nViews 54° apart.",
     ])
+
+
+def test_info_warns_when_the_views_are_too_similar() -> None:
+    text = info_markdown(_angio(30.0, 0.0, 0, 1), _angio(10.0, 5.0, 0, 1), "a.dcm", "b.dcm")
+    assert "Views 21° apart." in text
+    assert "Views too similar" in text and "refuse" in text
+    far = info_markdown(_angio(-30.0, 0.0, 0, 1), _angio(30.0, 0.0, 0, 1), "a.dcm", "b.dcm")
+    assert "too similar" not in far
 
 
 def test_marks_summary() -> None:
