@@ -118,6 +118,8 @@ def _read_any(path: str, geometry_json: str | None) -> RawFile:
         raise LoadError(f"{path}: no such file")
     if p.is_dir():
         raise LoadError(f"{path}: is a folder, not an image file")
+    if not p.is_file():  # a named pipe or a device would block or never end
+        raise LoadError(f"{path}: is not a regular file")
     if is_image_file(p):
         return read_image_file(path, geometry_json)
     return read_dicom(path)

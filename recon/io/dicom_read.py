@@ -191,6 +191,23 @@ def _representative_frame(value: Any, path: str) -> int | None:
         ) from None
 
 
+def _raw_maximum(ds: Dataset, allocated: int) -> int | None:
+    """The largest stored value of uncompressed unsigned pixel data, before pydicom
+    masks it to BitsStored; None when the data is compressed or signed."""
+    meta = getattr(ds, "file_meta", None)
+    ts = str(meta.get("TransferSyntaxUID", "")) if meta is not None else ""
+    if ts not in ("1.2.840.10008.1.2", "1.2.840.10008.1.2.1") or allocated not in (8, 16):
+        return None
+    if int(ds.get("PixelRepresentation", 0) or 0) != 0 or "PixelData" not in ds:
+        return None
+    data = ds.PixelData
+    dtype = np.dtype("<u2") if allocated == 16 else np.dtype(np.uint8)
+    usable = len(data) - len(data) % dtype.itemsize
+    if usable == 0:
+        return None
+    return int(np.frombuffer(data[:usable], dtype=dtype).max())
+
+
 def _bits_stored(ds: Dataset, arr: np.ndarray, path: str) -> int:
     """BitsStored (0028,0101), checked against BitsAllocated and the pixel values."""
     allocated = 8 * arr.dtype.itemsize
@@ -204,12 +221,12 @@ def _bits_stored(ds: Dataset, arr: np.ndarray, path: str) -> int:
             from None
     if not 1 <= bits <= max(allocated, 8):
         raise LoadError(f"{path}: BitsStored (0028,0101) is {bits}; expected 1 to {allocated}")
-    if np.issubdtype(arr.dtype, np.unsignedinteger) and arr.size and bits < allocated:
-        top = int(arr.max())
-        if top > 2**bits - 1:
-            raise LoadError(
-                f"{path}: BitsStored (0028,0101) is {bits} but the pixel values reach {top}"
-            )
+    top = _raw_maximum(ds, allocated) if bits < allocated else None
+    if top is not None and top > 2**bits - 1:
+        raise LoadError(
+            f"{path}: BitsStored (0028,0101) is {bits} but the stored pixel values reach {top} "
+            f"({top.bit_length()} bits)"
+        )
     return bits
 
 

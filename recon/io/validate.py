@@ -83,6 +83,8 @@ def check_geometry_value(key: str, value: Any, where: str) -> float | tuple[floa
         items = items * 2
     if key == "pixel_spacing_mm" and len(items) != 2:
         raise LoadError(f"{where}: expected one number or [row, col], got {safe_text(value)}")
+    if key != "pixel_spacing_mm" and len(items) != 1:
+        raise LoadError(f"{where}: expected one number, got {safe_text(value)}")
     numbers = []
     for item in items:
         number = _as_number(item)
