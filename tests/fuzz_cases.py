@@ -16,14 +16,12 @@ from __future__ import annotations
 
 import json
 import math
-import os
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import pydicom
 from PIL import Image
-from pydicom.valuerep import DSfloat
 
 from recon.geometry import ViewGeometry
 from recon.io.dicom_write import write_xa_dicom
@@ -425,8 +423,3 @@ def _random_seeds(rng: np.random.Generator) -> tuple[str, bytes]:
         return "invalid UTF-8", bytes(data)
     bad = rng.choice(["NaN", "Infinity", "-Infinity", "1e400", '"7"', "[1]", "true"])
     return f"coordinate {bad}", f'{{"features": [{{"a": [{bad}, 1], "b": [1, 1]}}]}}'.encode()
-
-
-def dev_null_path() -> str:
-    """os.devnull, named here for the subprocess cases."""
-    return os.devnull

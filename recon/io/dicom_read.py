@@ -134,9 +134,10 @@ def _decode_every_element(ds: Dataset, path: str) -> None:
     not an exception deep in a later ``ds.get`` (the raw bytes are not echoed)."""
     tag = None
     try:
-        for elem in ds.iterall():
-            _ = elem.value
-            tag = elem.tag
+        for dataset in (getattr(ds, "file_meta", None), ds):
+            for elem in dataset.iterall() if dataset is not None else ():
+                _ = elem.value
+                tag = elem.tag
     except Exception as exc:  # pydicom raises many kinds on corrupt element bytes
         after = f" after element {tag}" if tag is not None else ""
         raise LoadError(
