@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import sys
 import time
@@ -22,16 +23,61 @@ EXIT_USER_ERROR = 2
 BENCHES = ("centerline", "calibration", "matching", "reconstruct")
 
 
+class _Parser(argparse.ArgumentParser):
+    """An ArgumentParser whose usage errors are one line ``coronary3d: error: ...``
+    (exit 2) instead of the usage block; ``--help`` still prints the whole usage."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        text = " ".join(message.split())
+        self.exit(EXIT_USER_ERROR, f"coronary3d: error: {text} (see {self.prog} --help)\n")
+
+
+def _number(kind: type, low: float | None = None, high: float | None = None,
+            below_high: bool = False):
+    """An argparse type: a finite ``kind`` (int or float) in [low, high] (or
+    [low, high) when ``below_high``), refused in one line otherwise."""
+
+    def parse(text: str):
+        try:
+            value = kind(text)
+        except (TypeError, ValueError):
+            raise argparse.ArgumentTypeError(
+                f"{text!r} is not {'an integer' if kind is int else 'a number'}"
+            ) from None
+        if kind is float and not math.isfinite(value):
+            raise argparse.ArgumentTypeError(f"{text!r} is not a finite number")
+        top_ok = high is None or (value < high if below_high else value <= high)
+        if (low is not None and value < low) or not top_ok:
+            lo = "" if low is None else f"{low:g}" if kind is float else str(low)
+            hi = "" if high is None else f"{high:g}" if kind is float else str(high)
+            if high is None:
+                span = f"at least {lo}"
+            elif below_high:
+                span = f"from {lo} to below {hi}"
+            else:
+                span = f"from {lo} to {hi}"
+            raise argparse.ArgumentTypeError(f"{text} is out of range ({span})")
+        return value
+
+    parse.__name__ = kind.__name__
+    return parse
+
+
+_FINITE = _number(float)
+_COUNT = _number(int, 1)
+_INDEX = _number(int, 0)
+
+
 def _add_geometry_options(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group(
         "geometry overrides (for files that lack the tags; apply to every file given)"
     )
-    g.add_argument("--alpha-deg", type=float, help="primary angle, degrees (LAO +, RAO -)")
-    g.add_argument("--beta-deg", type=float, help="secondary angle, degrees (CRA +, CAU -)")
-    g.add_argument("--sid-mm", type=float, help="source to detector distance, mm")
-    g.add_argument("--sod-mm", type=float, help="source to isocenter distance, mm")
+    g.add_argument("--alpha-deg", type=_FINITE, help="primary angle, degrees (LAO +, RAO -)")
+    g.add_argument("--beta-deg", type=_FINITE, help="secondary angle, degrees (CRA +, CAU -)")
+    g.add_argument("--sid-mm", type=_FINITE, help="source to detector distance, mm")
+    g.add_argument("--sod-mm", type=_FINITE, help="source to isocenter distance, mm")
     g.add_argument(
-        "--pixel-spacing-mm", type=float, help="detector pixel size, mm (square pixels)"
+        "--pixel-spacing-mm", type=_FINITE, help="detector pixel size, mm (square pixels)"
     )
     g.add_argument(
         "--geometry-json",
@@ -52,7 +98,7 @@ def _overrides(args: argparse.Namespace):
         "beta_deg": getattr(args, "beta_deg", None),
         "sid_mm": getattr(args, "sid_mm", None),
         "sod_mm": getattr(args, "sod_mm", None),
-        "pixel_spacing_mm": (spacing, spacing) if spacing else None,
+        "pixel_spacing_mm": (spacing, spacing) if spacing is not None else None,
     }
     changes = {k: v for k, v in values.items() if v is not None}
     if not changes:
@@ -62,7 +108,7 @@ def _overrides(args: argparse.Namespace):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="coronary3d",
         description=(
             "3D coronary artery reconstruction from two X-ray angiograms: C-arm geometry "
@@ -81,7 +127,7 @@ def build_parser() -> argparse.ArgumentParser:
         "reconstruction would use and why. No patient data unless --show-patient.",
     )
     p.add_argument("files", nargs="+", metavar="FILE")
-    p.add_argument("--frame", type=int, help="frame index (0-based) to choose instead")
+    p.add_argument("--frame", type=_INDEX, help="frame index (0-based) to choose instead")
     p.add_argument("--show-patient", action="store_true", help="also print patient name and ID")
     p.add_argument("--json", action="store_true", help="print JSON instead of text")
     _add_geometry_options(p)
@@ -100,9 +146,12 @@ def build_parser() -> argparse.ArgumentParser:
         help="geometry preset: data1, data2, data3 (the paper's Table 1) or static "
         "(like the real phantom pair); default static",
     )
-    p.add_argument("--seed", type=int, default=0, help="random seed (same seed, same files)")
-    p.add_argument("--stenosis", type=float, default=50.0, help="%% diameter stenosis")
-    p.add_argument("--frames", type=int, default=1, help="number of cine frames")
+    p.add_argument("--seed", type=_number(int, 0, 2**32 - 1), default=0,
+                   help="random seed, 0 to 2^32-1 (same seed, same files)")
+    p.add_argument("--stenosis", type=_number(float, 0.0, 100.0, below_high=True), default=50.0,
+                   help="%% diameter stenosis, 0 to below 100")
+    p.add_argument("--frames", type=_number(int, 1, 200), default=1,
+                   help="number of cine frames (1 to 200)")
 
     p = sub.add_parser(
         "reconstruct",
@@ -121,9 +170,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--matcher", default="match3", choices=["match1", "match2", "match3", "match4"])
     p.add_argument("--optimizer", default="palm", choices=["palm", "lm", "anneal"])
     p.add_argument("--format", default="stl", help="mesh formats, comma separated: stl,obj,ply,glb")
-    p.add_argument("--frame-a", type=int, help="frame of view A (0-based) for a cine")
-    p.add_argument("--frame-b", type=int, help="frame of view B (0-based) for a cine")
-    p.add_argument("--segment", type=int, default=0, help="which segment of seeds.json (0-based)")
+    p.add_argument("--frame-a", type=_INDEX, help="frame of view A (0-based) for a cine")
+    p.add_argument("--frame-b", type=_INDEX, help="frame of view B (0-based) for a cine")
+    p.add_argument("--segment", type=_INDEX, default=0,
+                   help="which segment of seeds.json (0-based)")
     p.add_argument(
         "--self-calibration",
         action="store_true",
@@ -167,7 +217,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("manifest", metavar="MANIFEST.csv")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
-    p.add_argument("--workers", type=int, default=1, metavar="N",
+    p.add_argument("--workers", type=_COUNT, default=1, metavar="N",
                    help="local worker processes (default 1; ignored with --scheduler)")
     p.add_argument("--scheduler", metavar="ADDRESS",
                    help="an existing Dask scheduler, e.g. tcp://10.0.0.5:8786")
@@ -187,7 +237,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("file_b", nargs="?", metavar="B")
     p.add_argument("--seeds", metavar="FILE")
     p.add_argument("--host", default="127.0.0.1")
-    p.add_argument("--port", type=int, default=8080)
+    p.add_argument("--port", type=_number(int, 1, 65535), default=8080)
 
     p = sub.add_parser(
         "bench",
@@ -199,11 +249,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", metavar="PATH", help="write the result here")
     p.add_argument(
         "--cases",
-        type=int,
+        type=_COUNT,
         help="number of cases (per geometry for calibration, per imaging chain for "
         "--suite varied)",
     )
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=_number(int, 0, 2**32 - 1), default=0)
     p.add_argument(
         "--suite",
         choices=("regular", "varied"),
@@ -214,7 +264,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--jitter",
-        type=int,
+        type=_INDEX,
         default=0,
         metavar="N",
         help="reconstruct only: N more runs per case with every click moved up to 2 px; "
@@ -222,7 +272,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--workers",
-        type=int,
+        type=_COUNT,
         metavar="N",
         help="reconstruct, regular suite: run the cases on a local Dask cluster of N "
         "worker processes (the engine of `coronary3d batch`)",
@@ -244,7 +294,7 @@ def cmd_info(args: argparse.Namespace) -> int:
                 path, show_patient=args.show_patient, frame=args.frame, overrides=overrides
             )
         except LoadError as exc:
-            print(f"coronary3d: error: {exc}", file=sys.stderr)
+            print(f"coronary3d: error: {_one_line(exc)}", file=sys.stderr)
             failed = True
             continue
         if args.json:
@@ -481,16 +531,34 @@ COMMANDS = {
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    """Run one command; returns the exit code (argparse's own errors exit 2 through SystemExit)."""
     args = build_parser().parse_args(argv)
     try:
         return COMMANDS[args.command](args)
     except KeyboardInterrupt:
         return 130
+    except BrokenPipeError:  # stdout closed early (`coronary3d info --json | head`)
+        _silence_stdout()
+        return 0
     except CoronaryError as exc:
         if os.environ.get("CORONARY3D_DEBUG"):
             raise
-        print(f"coronary3d: error: {exc}", file=sys.stderr)
+        print(f"coronary3d: error: {_one_line(exc)}", file=sys.stderr)
         return EXIT_USER_ERROR
+
+
+def _one_line(exc: BaseException) -> str:
+    """An error's message as one printable line (a path may hold a newline or a control byte)."""
+    return "".join(ch if ch.isprintable() else "?" for ch in str(exc).strip())
+
+
+def _silence_stdout() -> None:
+    """Point stdout at /dev/null so that the interpreter's final flush is quiet."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError):
+        pass
 
 
 if __name__ == "__main__":

@@ -97,15 +97,53 @@ class Seeds:
         return np.asarray(pa, float).reshape(-1, 2), np.asarray(pb, float).reshape(-1, 2), names
 
 
+# Most points one view of a segment may have (the ends and the waypoints
+# between), and most segments and features in a file: far beyond what a
+# clinician clicks, small enough to bound the work.
+MAX_POINTS_PER_VIEW = 1000
+MAX_SEGMENTS = 100
+MAX_FEATURES = 1000
+# Largest coordinate magnitude accepted before the image bounds are known.
+_MAX_COORD_PX = 1e6
+
+
+def _shown(value: object, limit: int = 40) -> str:
+    """A short one-line rendering of a value for a message (no control characters)."""
+    text = "".join(ch if ch.isprintable() else "?" for ch in repr(value)[: limit + 1])
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def _finite(x: object) -> bool:
+    if isinstance(x, bool) or not isinstance(x, (int, float)):
+        return False
+    try:
+        return math.isfinite(float(x)) and abs(float(x)) <= _MAX_COORD_PX
+    except OverflowError:
+        return False
+
+
 def _point(value: object, where: str) -> tuple[float, float]:
-    if (
-        not isinstance(value, (list, tuple))
-        or len(value) != 2
-        or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in value)
-        or not all(math.isfinite(float(x)) for x in value)
-    ):
-        raise SeedsError(f"{where}: expected a point [col, row] of two numbers, got {value!r}")
+    if not isinstance(value, (list, tuple)) or len(value) != 2 or not all(map(_finite, value)):
+        raise SeedsError(
+            f"{where}: expected a point [col, row] of two finite numbers, got {_shown(value)}"
+        )
     return (float(value[0]), float(value[1]))
+
+
+def _entries(data: dict, key: str, source: str, limit: int) -> list:
+    value = data.get(key) or []
+    if not isinstance(value, list):
+        raise SeedsError(f"{source}: '{key}' must be a list, got {type(value).__name__}")
+    if len(value) > limit:
+        raise SeedsError(f"{source}: {len(value)} {key}; at most {limit} are read")
+    return value
+
+
+def _name(value: object, default: str) -> str:
+    if value is None:
+        return default
+    text = "".join(ch if ch.isprintable() else " " for ch in str(value)).strip()
+    return text[:80] or default
 
 
 def seeds_from_dict(data: object, source: str = "seeds") -> Seeds:
@@ -114,13 +152,15 @@ def seeds_from_dict(data: object, source: str = "seeds") -> Seeds:
         raise SeedsError(f"{source}: the top level must be a JSON object")
     version = data.get("version", 1)
     if version != 1:
-        raise SeedsError(f"{source}: unsupported version {version!r} (this program reads 1)")
+        raise SeedsError(
+            f"{source}: unsupported version {_shown(version)} (this program reads 1)"
+        )
     segments = []
-    for k, s in enumerate(data.get("segments", []) or []):
+    for k, s in enumerate(_entries(data, "segments", source, MAX_SEGMENTS)):
         where = f"{source}: segments[{k}]"
         if not isinstance(s, dict):
             raise SeedsError(f"{where} must be an object")
-        name = str(s.get("name", f"segment {k + 1}"))
+        name = _name(s.get("name"), f"segment {k + 1}")
         views = {}
         for key in ("a", "b"):
             pts = s.get(key)
@@ -128,16 +168,21 @@ def seeds_from_dict(data: object, source: str = "seeds") -> Seeds:
                 raise SeedsError(
                     f"{where} ({name}): '{key}' needs at least two points (proximal and distal)"
                 )
+            if len(pts) > MAX_POINTS_PER_VIEW:
+                raise SeedsError(
+                    f"{where} ({name}): '{key}' has {len(pts)} points; at most "
+                    f"{MAX_POINTS_PER_VIEW} per view are read"
+                )
             views[key] = tuple(_point(p, f"{where}.{key}[{i}]") for i, p in enumerate(pts))
         segments.append(Segment(name=name, a_px=views["a"], b_px=views["b"]))
     features = []
-    for k, f in enumerate(data.get("features", []) or []):
+    for k, f in enumerate(_entries(data, "features", source, MAX_FEATURES)):
         where = f"{source}: features[{k}]"
         if not isinstance(f, dict) or "a" not in f or "b" not in f:
             raise SeedsError(f"{where} must be an object with points 'a' and 'b'")
         features.append(
             Feature(
-                name=str(f.get("name", f"feature {k + 1}")),
+                name=_name(f.get("name"), f"feature {k + 1}"),
                 a_px=_point(f["a"], f"{where}.a"),
                 b_px=_point(f["b"], f"{where}.b"),
             )

@@ -33,6 +33,7 @@ from recon.io.frames import choose_frame
 from recon.io.image_files import is_image_file, read_image_file
 from recon.io.overrides import GEOMETRY_FIELDS, GeometryOverrides, spacing_pair
 from recon.io.raw import RawFile
+from recon.io.validate import check_geometry_value, check_image
 from recon.types import Angiogram
 
 __all__ = ["load_angiogram", "read_and_resolve"]
@@ -74,6 +75,7 @@ def load_angiogram(
         path_str, frame, overrides, geometry_json
     )
     geometry = _geometry(raw, values, problems, path_str)
+    check_image(raw.frames, path_str)
     n = raw.frames.shape[0]
     return Angiogram(
         image=raw.frames[index],
@@ -116,6 +118,8 @@ def _read_any(path: str, geometry_json: str | None) -> RawFile:
         raise LoadError(f"{path}: no such file")
     if p.is_dir():
         raise LoadError(f"{path}: is a folder, not an image file")
+    if not p.is_file():  # a named pipe or a device would block or never end
+        raise LoadError(f"{path}: is not a regular file")
     if is_image_file(p):
         return read_image_file(path, geometry_json)
     return read_dicom(path)
@@ -124,13 +128,16 @@ def _read_any(path: str, geometry_json: str | None) -> RawFile:
 def _resolve_geometry(
     raw: RawFile, overrides: GeometryOverrides | None
 ) -> tuple[dict[str, Any], list[str], list[str]]:
-    """Geometry values, notes and problems (missing values) of a file.
+    """Geometry values, notes and problems of a file.
 
     Returns ``values`` (key -> float / (row, col) / None), ``notes`` (how
-    non-header values were obtained) and ``problems`` (one phrase per missing
-    value, naming the tag and how to supply it).
+    non-header values were obtained) and ``problems`` (one phrase per value
+    that is missing, invalid or outside its range in :mod:`recon.io.validate`,
+    naming the tag and how to supply it). A header value that is present but
+    invalid is reported as such and never replaced by a fallback.
     """
     h = raw.header
+    invalid: dict[str, str] = h.get("invalid", {})
     rows, cols = raw.frames.shape[1:]
     if raw.default_overrides is not None:
         ov = (overrides or GeometryOverrides()).merged_over(raw.default_overrides)
@@ -138,7 +145,12 @@ def _resolve_geometry(
         ov = overrides or GeometryOverrides()
     ov_values = ov.values()
     values: dict[str, Any] = {}
+    sources: dict[str, str] = {}
     notes: list[str] = []
+    problems: list[str] = []
+    reported: set[str] = set()  # keys with a problem already
+    tags = {key: f"{keyword} {tag}" for key, keyword, tag, _ in GEOMETRY_FIELDS}
+    flags = {key: flag for key, _, _, flag in GEOMETRY_FIELDS}
 
     def from_override(key: str, header_value: Any, label: str) -> bool:
         if key not in ov_values:
@@ -146,6 +158,7 @@ def _resolve_geometry(
         src = _override_source(key, overrides, raw.default_overrides)
         value = ov_values[key]
         values[key] = value
+        sources[key] = src
         if h["kind"] == "image":
             return True  # the JSON is the image's header: nothing to note
         shown = _fmt_value(value)
@@ -155,47 +168,89 @@ def _resolve_geometry(
             notes.append(f"{label} {shown} from {src}")
         return True
 
+    def from_header(key: str, value: Any, where: str) -> Any:
+        """A header (or derived) value inside its range, else None and a problem."""
+        if value is None:
+            return None
+        try:
+            checked = check_geometry_value(key, value, where)
+        except LoadError as exc:
+            problems.append(f"{exc}; give {flags[key]} or a geometry JSON")
+            reported.add(key)
+            return None
+        sources[key] = where
+        return checked
+
+    def invalid_tag(key: str, keyword_tag: str, fallback_key: str | None = None) -> bool:
+        """Record a present-but-invalid tag as a problem; True when there was one."""
+        bad_key = fallback_key or key
+        if bad_key not in invalid:
+            return False
+        problems.append(
+            f"{keyword_tag} is invalid ({invalid[bad_key]}); give {flags[key]} or a geometry JSON"
+        )
+        reported.add(key)
+        return True
+
     for key, label in (("alpha_deg", "primary angle"), ("beta_deg", "secondary angle")):
         if not from_override(key, h[key], label):
-            values[key] = h[key]
+            values[key] = None if invalid_tag(key, tags[key]) else from_header(
+                key, h[key], tags[key])
     if not from_override("sid_mm", h["sid_mm"], "SID"):
-        values["sid_mm"] = h["sid_mm"] if (h["sid_mm"] or 0) > 0 else None
+        values["sid_mm"] = None if invalid_tag("sid_mm", tags["sid_mm"]) else from_header(
+            "sid_mm", h["sid_mm"], tags["sid_mm"])
     if not from_override("sod_mm", h["sod_mm"], "SOD"):
-        sod = h["sod_mm"] if (h["sod_mm"] or 0) > 0 else None
-        mag = h["magnification"]
-        if sod is None and values["sid_mm"] is not None and mag is not None and mag > 1:
-            sod = values["sid_mm"] / mag
-            notes.append(
-                f"SOD {sod:.1f} mm = SID / EstimatedRadiographicMagnificationFactor "
-                f"{mag:g} (DistanceSourceToPatient missing)"
-            )
-        values["sod_mm"] = sod
-    if not from_override("pixel_spacing_mm", h["pixel_spacing_mm"], "pixel spacing"):
-        spacing = spacing_pair(h["pixel_spacing_mm"]) if h["pixel_spacing_mm"] else None
-        if spacing is None and h["patient_pixel_spacing_mm"]:
-            iso = spacing_pair(h["patient_pixel_spacing_mm"])
-            sid, sod = values["sid_mm"], values["sod_mm"]
-            if iso is not None and sid is not None and sod is not None:
-                mag = sid / sod
-                spacing = (iso[0] * mag, iso[1] * mag)
+        values["sod_mm"] = None
+        if not invalid_tag("sod_mm", tags["sod_mm"]):
+            sod, where = h["sod_mm"], tags["sod_mm"]
+            mag_tag = "EstimatedRadiographicMagnificationFactor (0018,1114)"
+            if sod is None and values["sid_mm"] is not None and not invalid_tag(
+                "sod_mm", f"{mag_tag} (for the missing SOD)", "magnification"
+            ) and h["magnification"] is not None:
+                mag = h["magnification"]
+                sod = values["sid_mm"] / mag
+                where = f"SOD from SID / {mag_tag} {mag:g}"
                 notes.append(
-                    f"pixel spacing {_fmt_value(spacing)} mm = PixelSpacing "
-                    f"{_fmt_value(iso)} mm x SID/SOD {mag:.4g} (ImagerPixelSpacing missing; "
-                    f"PixelSpacing taken as calibrated at the isocenter)"
+                    f"SOD {sod:.1f} mm = SID / EstimatedRadiographicMagnificationFactor "
+                    f"{mag:g} (DistanceSourceToPatient missing)"
                 )
-        if spacing is None and h["fov_mm"]:
-            fov = h["fov_mm"]
-            if all(v > 0 for v in fov):
+            values["sod_mm"] = from_header("sod_mm", sod, where)
+    if not from_override("pixel_spacing_mm", h["pixel_spacing_mm"], "pixel spacing"):
+        values["pixel_spacing_mm"] = None
+        key = "pixel_spacing_mm"
+        if not invalid_tag(key, tags[key]):
+            spacing, where = h[key], tags[key]
+            if spacing is None and h["patient_pixel_spacing_mm"]:
+                iso = spacing_pair(h["patient_pixel_spacing_mm"])
+                sid, sod = values["sid_mm"], values["sod_mm"]
+                if iso is not None and sid is not None and sod is not None:
+                    mag = sid / sod
+                    spacing = (iso[0] * mag, iso[1] * mag)
+                    where = "pixel spacing from PixelSpacing (0028,0030) x SID/SOD"
+                    notes.append(
+                        f"pixel spacing {_fmt_value(spacing)} mm = PixelSpacing "
+                        f"{_fmt_value(iso)} mm x SID/SOD {mag:.4g} (ImagerPixelSpacing missing; "
+                        f"PixelSpacing taken as calibrated at the isocenter)"
+                    )
+            elif spacing is None:
+                invalid_tag(key, "PixelSpacing (0028,0030) (for the missing ImagerPixelSpacing)",
+                            "patient_pixel_spacing_mm")
+            if spacing is None and h["fov_mm"]:
+                fov = h["fov_mm"]
                 spacing = (fov[0] / rows, fov[-1] / cols)
+                where = "pixel spacing from FieldOfViewDimensions (0018,1149) / image size"
                 notes.append(
                     f"pixel spacing {_fmt_value(spacing)} mm from FieldOfViewDimensions "
                     f"{_fmt_value(fov)} mm / {rows}x{cols} px (ImagerPixelSpacing missing)"
                 )
-        values["pixel_spacing_mm"] = spacing
+            elif spacing is None:
+                invalid_tag(
+                    key, "FieldOfViewDimensions (0018,1149) (for the missing ImagerPixelSpacing)",
+                    "fov_mm")
+            values[key] = from_header(key, spacing, where)
 
-    problems = []
     for key, keyword, tag, flag in GEOMETRY_FIELDS:
-        if values[key] is None:
+        if values[key] is None and key not in reported:
             if h["kind"] == "image":
                 json_name = h.get("json")
                 if json_name:
@@ -207,6 +262,12 @@ def _resolve_geometry(
                     )
             else:
                 problems.append(f"{keyword} {tag} is missing; give {flag} or a geometry JSON")
+    if not problems and values["sod_mm"] is not None and values["sid_mm"] is not None:
+        if not values["sod_mm"] < values["sid_mm"]:
+            problems.append(
+                f"invalid geometry: SOD {values['sod_mm']:g} mm ({sources['sod_mm']}) must be "
+                f"below SID {values['sid_mm']:g} mm ({sources['sid_mm']})"
+            )
     return values, notes, problems
 
 
@@ -230,8 +291,8 @@ def _geometry(raw: RawFile, values: dict[str, Any], problems: list[str], path: s
     if problems:
         extra = ""
         if len(problems) > 1:
-            others = [p.split(" is missing")[0] for p in problems[1:]]
-            extra = f" (also missing: {', '.join(others)})"
+            others = [p.split(" is ")[0].split(" = ")[0].split(":")[0] for p in problems[1:]]
+            extra = f" (also: {', '.join(others)})"
         raise LoadError(f"{path}: {problems[0]}{extra}")
     rows, cols = raw.frames.shape[1:]
     try:

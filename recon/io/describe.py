@@ -1,6 +1,6 @@
 """What ``coronary3d info`` says about a file: header facts, geometry, chosen frame.
 
-Missing geometry is reported, never raised, so that a user can see at once
+Missing, invalid or out-of-range geometry is reported, never raised, so that a user can see at once
 which values a file lacks and which option supplies each one.
 """
 
@@ -102,7 +102,8 @@ def format_description(desc: dict) -> str:
     for note in desc["geometry_notes"]:
         lines.append(f"  note            {note}")
     for problem in desc["missing"]:
-        lines.append(f"  missing         {problem}")
+        label = "missing" if " is missing" in problem else "problem"
+        lines.append(f"  {label:<15} {problem}")
     if desc["r_wave_pointer"]:
         lines.append(
             "  R waves         frames "

@@ -23,6 +23,7 @@ from pydicom.uid import UID
 from recon.errors import LoadError
 from recon.io.image_files import IMAGE_SUFFIXES
 from recon.io.raw import RawFile, first_line
+from recon.io.validate import safe_text
 
 __all__ = ["LOSSY_TRANSFER_SYNTAXES", "XA_SOP_CLASS_UID", "is_lossy", "read_dicom"]
 
@@ -128,6 +129,108 @@ def _as_ints(value: Any) -> list[int]:
     return out
 
 
+def _decode_every_element(ds: Dataset, path: str) -> None:
+    """Decode every element now, so that a corrupt one is a LoadError here and
+    not an exception deep in a later ``ds.get`` (the raw bytes are not echoed)."""
+    tag = None
+    try:
+        for dataset in (getattr(ds, "file_meta", None), ds):
+            for elem in dataset.iterall() if dataset is not None else ():
+                _ = elem.value
+                tag = elem.tag
+    except Exception as exc:  # pydicom raises many kinds on corrupt element bytes
+        after = f" after element {tag}" if tag is not None else ""
+        raise LoadError(
+            f"{path}: corrupt DICOM header: an element{after} cannot be decoded "
+            f"({type(exc).__name__})"
+        ) from None
+
+
+def _header_number(ds: Dataset, keyword: str, key: str, invalid: dict[str, str],
+                   positive: bool = False) -> float | None:
+    """A one-number tag (the first value of several), None when absent; a value
+    present but unusable is recorded in ``invalid`` (and None is returned)."""
+    raw = _dicom_value(ds, keyword)
+    if raw is None:
+        return None
+    value = _as_float(raw)
+    if value is None or (positive and value <= 0):
+        invalid[key] = safe_text(raw)
+        return None
+    return value
+
+
+def _header_numbers(ds: Dataset, keyword: str, key: str,
+                    invalid: dict[str, str]) -> tuple[float, ...] | None:
+    """A one- or two-number positive tag (a spacing, a field of view), as
+    :func:`_header_number`."""
+    raw = _dicom_value(ds, keyword)
+    if raw is None:
+        return None
+    values = _as_floats(raw)
+    if values is None or len(values) > 2 or not all(v > 0 for v in values):
+        invalid[key] = safe_text(raw)
+        return None
+    return values
+
+
+def _representative_frame(value: Any, path: str) -> int | None:
+    """RepresentativeFrameNumber (0028,6010), one positive integer, or None when absent."""
+    if value is None or value == "":
+        return None
+    if isinstance(value, (list, tuple, pydicom.multival.MultiValue)):
+        raise LoadError(
+            f"{path}: RepresentativeFrameNumber (0028,6010) has {len(value)} values; "
+            f"expected one frame number"
+        )
+    try:
+        return int(value)
+    except (TypeError, ValueError):
+        raise LoadError(
+            f"{path}: RepresentativeFrameNumber (0028,6010) is not a frame number "
+            f"({safe_text(value)})"
+        ) from None
+
+
+def _raw_maximum(ds: Dataset, allocated: int) -> int | None:
+    """The largest stored value of uncompressed unsigned pixel data, before pydicom
+    masks it to BitsStored; None when the data is compressed or signed."""
+    meta = getattr(ds, "file_meta", None)
+    ts = str(meta.get("TransferSyntaxUID", "")) if meta is not None else ""
+    if ts not in ("1.2.840.10008.1.2", "1.2.840.10008.1.2.1") or allocated not in (8, 16):
+        return None
+    if int(ds.get("PixelRepresentation", 0) or 0) != 0 or "PixelData" not in ds:
+        return None
+    data = ds.PixelData
+    dtype = np.dtype("<u2") if allocated == 16 else np.dtype(np.uint8)
+    usable = len(data) - len(data) % dtype.itemsize
+    if usable == 0:
+        return None
+    return int(np.frombuffer(data[:usable], dtype=dtype).max())
+
+
+def _bits_stored(ds: Dataset, arr: np.ndarray, path: str) -> int:
+    """BitsStored (0028,0101), checked against BitsAllocated and the pixel values."""
+    allocated = 8 * arr.dtype.itemsize
+    raw = ds.get("BitsStored")
+    if raw is None or raw == "":
+        return allocated
+    try:
+        bits = int(raw)
+    except (TypeError, ValueError):
+        raise LoadError(f"{path}: BitsStored (0028,0101) is not a number ({safe_text(raw)})") \
+            from None
+    if not 1 <= bits <= max(allocated, 8):
+        raise LoadError(f"{path}: BitsStored (0028,0101) is {bits}; expected 1 to {allocated}")
+    top = _raw_maximum(ds, allocated) if bits < allocated else None
+    if top is not None and top > 2**bits - 1:
+        raise LoadError(
+            f"{path}: BitsStored (0028,0101) is {bits} but the stored pixel values reach {top} "
+            f"({top.bit_length()} bits)"
+        )
+    return bits
+
+
 def read_dicom(path: str) -> RawFile:
     """Frames, header geometry and facts of a DICOM file; LoadError for what cannot be used."""
     with warnings.catch_warnings():
@@ -141,8 +244,10 @@ def read_dicom(path: str) -> RawFile:
             ) from None
         except Exception as exc:  # truncated or corrupt header
             raise LoadError(
-                f"{path}: unreadable DICOM file, truncated or corrupt ({first_line(exc)})"
+                f"{path}: unreadable DICOM file, truncated or corrupt "
+                f"({safe_text(first_line(exc), 80)})"
             ) from None
+        _decode_every_element(ds, path)
 
         meta = getattr(ds, "file_meta", None)
         sop_class = str(
@@ -174,7 +279,8 @@ def read_dicom(path: str) -> RawFile:
         except Exception as exc:
             ts_name = UID(ts).name if ts else "unknown transfer syntax"
             raise LoadError(
-                f"{path}: cannot decode the pixel data ({ts_name}): {first_line(exc)}"
+                f"{path}: cannot decode the pixel data ({ts_name}): "
+                f"{safe_text(first_line(exc), 80)}"
             ) from None
 
     rows, cols = int(ds.get("Rows", 0) or 0), int(ds.get("Columns", 0) or 0)
@@ -191,7 +297,7 @@ def read_dicom(path: str) -> RawFile:
             f"{n_frames} frame(s) of {rows}x{cols}"
         )
     photometric = str(ds.get("PhotometricInterpretation", "MONOCHROME2") or "MONOCHROME2")
-    bits_stored = int(ds.get("BitsStored", 8 * arr.dtype.itemsize) or 8)
+    bits_stored = _bits_stored(ds, arr, path)
     signed = int(ds.get("PixelRepresentation", 0) or 0) == 1
     frames = arr.astype(np.float32, copy=False)
     if photometric == "MONOCHROME1":
@@ -231,22 +337,31 @@ def read_dicom(path: str) -> RawFile:
             if ds.get("PixelIntensityRelationship") is not None else None
         ),
         "lossy": is_lossy(ts, ds.get("LossyImageCompression")),
-        "representative_frame_number": int(rep_number) if rep_number is not None else None,
+        "representative_frame_number": _representative_frame(rep_number, path),
         "r_wave_pointer": r_wave_pointer,
         "r_wave_frames": [k - 1 for k in r_wave_pointer if 1 <= k <= n_frames],
         "manufacturer": str(ds.get("Manufacturer", "") or ""),
         "series_description": str(ds.get("SeriesDescription", "") or ""),
     }
+    invalid: dict[str, str] = {}
     header = {
-        "alpha_deg": _as_float(_dicom_value(ds, "PositionerPrimaryAngle")),
-        "beta_deg": _as_float(_dicom_value(ds, "PositionerSecondaryAngle")),
-        "sid_mm": _as_float(_dicom_value(ds, "DistanceSourceToDetector")),
-        "sod_mm": _as_float(_dicom_value(ds, "DistanceSourceToPatient")),
-        "pixel_spacing_mm": _as_floats(_dicom_value(ds, "ImagerPixelSpacing")),
-        "patient_pixel_spacing_mm": _as_floats(_dicom_value(ds, "PixelSpacing")),
-        "fov_mm": _as_floats(_dicom_value(ds, "FieldOfViewDimensions")),
-        "magnification": _as_float(_dicom_value(ds, "EstimatedRadiographicMagnificationFactor")),
+        "alpha_deg": _header_number(ds, "PositionerPrimaryAngle", "alpha_deg", invalid),
+        "beta_deg": _header_number(ds, "PositionerSecondaryAngle", "beta_deg", invalid),
+        "sid_mm": _header_number(ds, "DistanceSourceToDetector", "sid_mm", invalid,
+                                 positive=True),
+        "sod_mm": _header_number(ds, "DistanceSourceToPatient", "sod_mm", invalid,
+                                 positive=True),
+        "pixel_spacing_mm": _header_numbers(ds, "ImagerPixelSpacing", "pixel_spacing_mm",
+                                            invalid),
+        "patient_pixel_spacing_mm": _header_numbers(ds, "PixelSpacing",
+                                                    "patient_pixel_spacing_mm", invalid),
+        "fov_mm": _header_numbers(ds, "FieldOfViewDimensions", "fov_mm", invalid),
+        "magnification": _header_number(ds, "EstimatedRadiographicMagnificationFactor",
+                                        "magnification", invalid, positive=True),
         "kind": "dicom",
+        # key -> a safe rendering of a value that is present but not usable
+        # (text, NaN, zero or negative, too many values)
+        "invalid": invalid,
     }
     patient = {
         "name": str(ds.get("PatientName", "") or ""),

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import os
+import stat
 import tempfile
 from pathlib import Path
 
@@ -17,20 +18,64 @@ from recon.errors import OutputError
 __all__ = ["read_json", "atomic_write_bytes"]
 
 
+# A JSON input (seeds, geometry, sidecar) larger than this, or nested deeper,
+# is refused: the project's largest real ones are a few kB and 4 levels deep.
+MAX_JSON_BYTES = 10 * 1024 * 1024
+MAX_JSON_DEPTH = 32
+
+
 def read_json(path: str | os.PathLike, error: type[Exception], what: str = "file") -> object:
     """Parse a JSON file; failures raise ``error`` with one line naming the file.
 
     ``what`` names the file's role in the message ("cannot read the geometry JSON").
+    Refused: a path that is not a regular file (a folder, a pipe, /dev/zero), a
+    file over :data:`MAX_JSON_BYTES`, text that is not UTF-8, invalid JSON,
+    integers too long to convert and nesting deeper than :data:`MAX_JSON_DEPTH`.
     """
     p = Path(path)
     try:
-        text = p.read_text(encoding="utf-8")
+        info = p.stat()
+        if not stat.S_ISREG(info.st_mode):
+            raise error(f"{p}: the {what} is not a regular file")
+        if info.st_size > MAX_JSON_BYTES:
+            raise error(
+                f"{p}: the {what} is {info.st_size / 1e6:.1f} MB; at most "
+                f"{MAX_JSON_BYTES // (1024 * 1024)} MB is read"
+            )
+        with p.open("rb") as fh:
+            data = fh.read(MAX_JSON_BYTES + 1)
     except OSError as exc:
         raise error(f"{p}: cannot read the {what} ({exc.strerror or exc})") from None
+    if len(data) > MAX_JSON_BYTES:
+        raise error(f"{p}: the {what} is over {MAX_JSON_BYTES // (1024 * 1024)} MB")
     try:
-        return json.loads(text)
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise error(f"{p}: the {what} is not UTF-8 text (byte {exc.start})") from None
+    try:
+        value = json.loads(text)
     except json.JSONDecodeError as exc:
         raise error(f"{p}: not valid JSON (line {exc.lineno}: {exc.msg})") from None
+    except RecursionError:
+        raise error(f"{p}: the {what} is nested too deeply") from None
+    except ValueError:  # an integer of more digits than Python converts
+        raise error(f"{p}: the {what} holds a number too long to read") from None
+    if _depth_over(value, MAX_JSON_DEPTH):
+        raise error(f"{p}: the {what} is nested deeper than {MAX_JSON_DEPTH} levels")
+    return value
+
+
+def _depth_over(value: object, limit: int) -> bool:
+    """True when lists / objects in ``value`` nest deeper than ``limit`` (no recursion)."""
+    stack = [(value, 1)]
+    while stack:
+        item, depth = stack.pop()
+        if isinstance(item, (list, dict)):
+            if depth > limit:
+                return True
+            children = item.values() if isinstance(item, dict) else item
+            stack.extend((child, depth + 1) for child in children)
+    return False
 
 
 def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> None:

@@ -9,7 +9,6 @@ rejected as likely typos.
 
 from __future__ import annotations
 
-import math
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -19,6 +18,7 @@ import numpy as np
 
 from recon.errors import LoadError
 from recon.io.files import read_json
+from recon.io.validate import check_geometry_value
 
 __all__ = [
     "GEOMETRY_FIELDS",
@@ -38,6 +38,7 @@ GEOMETRY_FIELDS = (
     ("pixel_spacing_mm", "ImagerPixelSpacing", "(0018,1164)", "--pixel-spacing-mm"),
 )
 GEOMETRY_KEYS = tuple(f[0] for f in GEOMETRY_FIELDS)
+_FLAGS = {f[0]: f[3] for f in GEOMETRY_FIELDS}
 # Keys of ViewGeometry.to_dict() that a geometry JSON may carry and that are
 # checked (rows, cols) or ignored (the rest) rather than rejected as typos.
 _TOLERATED_JSON_KEYS = ("rows", "cols", "principal_offset_px", "rotvec_corr", "t_corr_mm")
@@ -64,23 +65,17 @@ class GeometryOverrides:
     source: str = "override"
 
     def __post_init__(self) -> None:
-        for key in ("alpha_deg", "beta_deg", "sid_mm", "sod_mm"):
+        for key in GEOMETRY_KEYS:
             value = getattr(self, key)
             if value is not None:
-                value = float(value)
-                if not math.isfinite(value):
-                    raise LoadError(f"{self.source}: {key} must be a finite number, got {value}")
-                if key in ("sid_mm", "sod_mm") and value <= 0:
-                    raise LoadError(f"{self.source}: {key} must be positive, got {value}")
-                object.__setattr__(self, key, value)
-        if self.pixel_spacing_mm is not None:
-            spacing = spacing_pair(self.pixel_spacing_mm)
-            if spacing is None:
-                raise LoadError(
-                    f"{self.source}: pixel_spacing_mm must be one positive number or "
-                    f"[row, col], got {self.pixel_spacing_mm!r}"
-                )
-            object.__setattr__(self, "pixel_spacing_mm", spacing)
+                object.__setattr__(self, key, check_geometry_value(key, value, self.where(key)))
+
+    def where(self, key: str) -> str:
+        """How a message names the value of ``key``: the flag for the command
+        line, else "<source>: <key>"."""
+        if self.source == "command line":
+            return _FLAGS[key]
+        return f"{self.source}: {key}"
 
     def values(self) -> dict[str, Any]:
         """The supplied (not None) values by key."""
@@ -130,17 +125,7 @@ def overrides_from_dict(data: dict, source: str) -> GeometryOverrides:
         raise LoadError(
             f"{source}: unknown key {unknown[0]!r} (expected {', '.join(GEOMETRY_KEYS)})"
         )
-    kwargs: dict[str, Any] = {}
-    for key in GEOMETRY_KEYS:
-        value = data.get(key)
-        if value is None:
-            continue
-        if key == "pixel_spacing_mm":
-            kwargs[key] = value
-            continue
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise LoadError(f"{source}: {key} must be a number, got {value!r}")
-        kwargs[key] = float(value)
+    kwargs: dict[str, Any] = {key: data[key] for key in GEOMETRY_KEYS if data.get(key) is not None}
     return GeometryOverrides(**kwargs, source=Path(source).name)
 
 

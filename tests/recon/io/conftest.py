@@ -10,7 +10,7 @@ import pytest
 from recon.geometry import ViewGeometry
 
 
-def _geometry(rows: int = 40, cols: int = 32) -> ViewGeometry:
+def _geometry(rows: int = 80, cols: int = 64) -> ViewGeometry:
     return ViewGeometry(
         alpha_deg=-29.3,
         beta_deg=25.5,
@@ -22,7 +22,7 @@ def _geometry(rows: int = 40, cols: int = 32) -> ViewGeometry:
     )
 
 
-def _run_with_line(depths: list[float], rows: int = 40, cols: int = 32) -> np.ndarray:
+def _run_with_line(depths: list[float], rows: int = 80, cols: int = 64) -> np.ndarray:
     """(F, rows, cols) uint16 frames: flat 2000 background, a dark vertical line per frame."""
     frames = np.full((len(depths), rows, cols), 2000, dtype=np.uint16)
     for k, depth in enumerate(depths):
@@ -32,11 +32,11 @@ def _run_with_line(depths: list[float], rows: int = 40, cols: int = 32) -> np.nd
 
 @pytest.fixture
 def xa_geometry() -> Callable[..., ViewGeometry]:
-    """``xa_geometry(rows=40, cols=32)``: the IM7 view's geometry for a small image."""
+    """``xa_geometry(rows=80, cols=64)``: the IM7 view's geometry for a small image."""
     return _geometry
 
 
 @pytest.fixture
 def run_with_line() -> Callable[..., np.ndarray]:
-    """``run_with_line(depths, rows=40, cols=32)``: frames with a dark line of each depth."""
+    """``run_with_line(depths, rows=80, cols=64)``: frames with a dark line of each depth."""
     return _run_with_line

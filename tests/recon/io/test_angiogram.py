@@ -134,7 +134,7 @@ def test_fallbacks_are_derived_and_noted(
     )
     ang = load_angiogram(path)
     assert ang.geometry.sod_mm == pytest.approx(720.0, abs=1e-5)
-    assert ang.geometry.pixel_spacing_mm == pytest.approx((24 / 40, 16 / 32))
+    assert ang.geometry.pixel_spacing_mm == pytest.approx((24 / 80, 16 / 64))
     notes = " | ".join(ang.geometry_notes)
     assert "EstimatedRadiographicMagnificationFactor" in notes
     assert "FieldOfViewDimensions" in notes and "ImagerPixelSpacing missing" in notes
@@ -173,5 +173,10 @@ def test_override_replaces_header_value_and_says_so() -> None:
 
 
 def test_inconsistent_geometry_is_a_load_error() -> None:
-    with pytest.raises(LoadError, match=r"IM7\.dcm: invalid geometry: sod_mm"):
-        load_angiogram(IM7, overrides=GeometryOverrides(sod_mm=2000.0))
+    # each value in its range, but the isocenter beyond the detector (SID 976 in the header)
+    overrides = GeometryOverrides(sod_mm=1000.0)
+    with pytest.raises(LoadError, match=r"IM7\.dcm: invalid geometry: SOD 1000 mm \(override\) "
+                       r"must be below SID 976 mm \(DistanceSourceToDetector"):
+        load_angiogram(IM7, overrides=overrides)
+    with pytest.raises(LoadError, match=r"^override: sod_mm = 2000 mm is outside .*400 to 1300"):
+        GeometryOverrides(sod_mm=2000.0)

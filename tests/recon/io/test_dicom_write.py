@@ -18,7 +18,7 @@ def test_write_read_round_trip_12_bit_multiframe(
     tmp_path: Path, xa_geometry: Callable[..., Any]
 ) -> None:
     rng = np.random.default_rng(7)
-    frames = rng.integers(0, 4096, size=(5, 40, 32), dtype=np.uint16)
+    frames = rng.integers(0, 4096, size=(5, 80, 64), dtype=np.uint16)
     geometry = xa_geometry()
     path = tmp_path / "run.dcm"
     write_xa_dicom(
@@ -43,7 +43,7 @@ def test_write_read_round_trip_12_bit_multiframe(
 
 
 def test_write_read_single_frame_8_bit(tmp_path: Path, xa_geometry: Callable[..., Any]) -> None:
-    frame = np.arange(40 * 32, dtype=np.uint16).reshape(40, 32) % 256
+    frame = np.arange(80 * 64, dtype=np.uint16).reshape(80, 64) % 256
     path = tmp_path / "single.dcm"
     write_xa_dicom(path, frame.astype(np.uint8), xa_geometry(), bits_stored=8)
     ang = load_angiogram(path)
@@ -53,13 +53,13 @@ def test_write_read_single_frame_8_bit(tmp_path: Path, xa_geometry: Callable[...
 
 def test_writer_rejects_bad_input(tmp_path: Path, xa_geometry: Callable[..., Any]) -> None:
     with pytest.raises(ValueError, match="does not fit in 12 bits"):
-        write_xa_dicom(tmp_path / "x.dcm", np.full((40, 32), 5000, np.uint16), xa_geometry())
+        write_xa_dicom(tmp_path / "x.dcm", np.full((80, 64), 5000, np.uint16), xa_geometry())
     with pytest.raises(ValueError, match="geometry says"):
-        write_xa_dicom(tmp_path / "x.dcm", np.zeros((30, 32), np.uint16), xa_geometry())
+        write_xa_dicom(tmp_path / "x.dcm", np.zeros((30, 64), np.uint16), xa_geometry())
     with pytest.raises(ValueError, match="unsigned integer"):
-        write_xa_dicom(tmp_path / "x.dcm", np.zeros((40, 32), np.float32), xa_geometry())
+        write_xa_dicom(tmp_path / "x.dcm", np.zeros((80, 64), np.float32), xa_geometry())
     with pytest.raises(ValueError, match="r_wave_frames"):
         write_xa_dicom(
-            tmp_path / "x.dcm", np.zeros((3, 40, 32), np.uint16), xa_geometry(), r_wave_frames=[3]
+            tmp_path / "x.dcm", np.zeros((3, 80, 64), np.uint16), xa_geometry(), r_wave_frames=[3]
         )
     assert not (tmp_path / "x.dcm").exists()

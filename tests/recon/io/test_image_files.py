@@ -28,20 +28,20 @@ def _geometry_json(path: Path, **extra: object) -> None:
 
 
 def test_png_with_sidecar_json(tmp_path: Path) -> None:
-    pixels = (np.arange(30 * 20).reshape(30, 20) * 50).astype(np.uint16)
+    pixels = (np.arange(70 * 64).reshape(70, 64) * 13).astype(np.uint16)
     png = tmp_path / "view.png"
     Image.fromarray(pixels).save(png)
-    _geometry_json(tmp_path / "view.json", rows=30, cols=20)
+    _geometry_json(tmp_path / "view.json", rows=70, cols=64)
     ang = load_angiogram(png)
     assert isinstance(ang, Angiogram)
     np.testing.assert_array_equal(ang.image, pixels.astype(np.float32))
-    expected = ViewGeometry(30.7, 23.6, 976.0, 720.0, (0.5, 0.4), rows=30, cols=20)
+    expected = ViewGeometry(30.7, 23.6, 976.0, 720.0, (0.5, 0.4), rows=70, cols=64)
     assert ang.geometry == expected
     assert ang.n_frames == 1 and ang.frame_reason == "single frame" and ang.frames is None
 
 
 def test_rgb_tiff_with_named_json_is_grey(tmp_path: Path) -> None:
-    grey = np.tile(np.arange(0, 250, 10, dtype=np.uint8), (12, 1))  # (12, 25)
+    grey = np.tile(np.arange(0, 250, 10, dtype=np.uint8), (64, 3))  # (64, 75)
     rgb = np.stack([grey, grey, grey], axis=-1)
     tif = tmp_path / "view.tif"
     Image.fromarray(rgb).save(tif)
@@ -49,7 +49,7 @@ def test_rgb_tiff_with_named_json_is_grey(tmp_path: Path) -> None:
     _geometry_json(js)
     ang = load_angiogram(tif, geometry_json=js)
     np.testing.assert_allclose(ang.image, grey.astype(np.float32), atol=1e-3)
-    assert ang.geometry.rows == 12 and ang.geometry.cols == 25
+    assert ang.geometry.rows == 64 and ang.geometry.cols == 75
 
 
 def test_png_geometry_problems(tmp_path: Path) -> None:

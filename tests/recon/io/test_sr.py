@@ -129,7 +129,7 @@ def test_a_cine_frame_is_referenced_by_its_number(tmp_path):
 
 def test_image_inputs_are_refused_before_any_work(tmp_path):
     png = tmp_path / "a.png"
-    Image.fromarray(np.full((32, 32), 200, dtype=np.uint8)).save(png)
+    Image.fromarray(np.full((64, 64), 200, dtype=np.uint8)).save(png)
     (tmp_path / "a.json").write_text(json.dumps(
         {"alpha_deg": 0, "beta_deg": 0, "sid_mm": 1000, "sod_mm": 750, "pixel_spacing_mm": 0.3}))
     out = tmp_path / "out"
