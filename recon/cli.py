@@ -237,7 +237,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("file_b", nargs="?", metavar="B")
     p.add_argument("--seeds", metavar="FILE")
     p.add_argument("--host", default="127.0.0.1")
-    p.add_argument("--port", type=_number(int, 1, 65535), default=8080)
+    p.add_argument("--port", type=_number(int, 0, 65535), default=8080,
+                   help="port to serve on (0: any free port)")
 
     p = sub.add_parser(
         "bench",

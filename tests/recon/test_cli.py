@@ -157,3 +157,12 @@ def test_bench_modules_expose_run_and_format_table(name):
 
     module = importlib.import_module(f"recon.bench.{name}")
     assert callable(module.run) and callable(module.format_table)
+
+
+def test_view_port_0_asks_for_any_free_port_and_out_of_range_ports_are_refused() -> None:
+    from recon.cli import build_parser
+
+    assert build_parser().parse_args(["view", "--port", "0"]).port == 0
+    for bad in ("-1", "65536"):
+        proc = run_cli("view", "--port", bad)
+        assert_one_line_error(proc, "--port")
