@@ -43,6 +43,7 @@ __all__ = [
     "triangulate",
     "ray_distance_mm",
     "view_separation_deg",
+    "MIN_VIEW_SEPARATION_DEG",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -417,6 +418,12 @@ def ray_distance_mm(
     if np.any(parallel):
         dist[parallel] = np.linalg.norm(np.cross(w, da[parallel]), axis=1)
     return dist
+
+
+#: Least angle (deg) between the two views' central rays that a reconstruction accepts
+#: without being told to go on (the limit named in issue 14 of the project; the README
+#: recommends views at least this far apart).
+MIN_VIEW_SEPARATION_DEG = 25.0
 
 
 def view_separation_deg(view_a: ViewGeometry, view_b: ViewGeometry) -> float:

@@ -29,7 +29,7 @@ from recon.calibration import CalibrationResult, calibrate, refine_with_matches
 from recon.centerline import VesselnessMap, compute_vesselness, trace_segment
 from recon.consistency import ConsistencyResult, check_consistency
 from recon.errors import CoronaryError
-from recon.geometry import ViewGeometry, view_separation_deg
+from recon.geometry import MIN_VIEW_SEPARATION_DEG, ViewGeometry, view_separation_deg
 from recon.intensity import resolve_mapping
 from recon.matching import match_centerlines
 from recon.measure import LumenProfile, Measurements, lumen_profile, measure_lumen
@@ -51,12 +51,6 @@ Progress = Callable[[str, float], None]
 
 class PipelineError(CoronaryError):
     """The inputs cannot be reconstructed (one line: what and why)."""
-
-
-#: Least angle (deg) between the two views' central rays that the pipeline accepts
-#: without ``allow_close_views`` (the limit named in issue 14 of the project; the
-#: README recommends views at least this far apart).
-MIN_VIEW_SEPARATION_DEG = 25.0
 
 
 @dataclass(frozen=True)

@@ -259,7 +259,7 @@ def minimal_route(
         except TraceError as err:
             last_err = err
             continue
-        lumen_px = RADIUS_PER_SIGMA * np.exp(log_scale)
+        lumen_px = radius_from_scale(vmap.scale_px[r0:r1, c0:c1])
         return _round_loops(route, graph, band, lumen_px, local, move_px, (c0, r0), view, r_ref)
     assert last_err is not None
     raise last_err

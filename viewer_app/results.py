@@ -12,8 +12,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from recon.geometry import view_separation_deg
-from recon.pipeline import MIN_VIEW_SEPARATION_DEG
+from recon.geometry import MIN_VIEW_SEPARATION_DEG, view_separation_deg
 
 if TYPE_CHECKING:
     from recon.calibration import CalibrationResult

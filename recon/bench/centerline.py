@@ -45,6 +45,7 @@ from recon.bench.common import (
     median,
     parallel_map,
     percentile,
+    varied_rows,
 )
 from recon.centerline import compute_vesselness, trace_segment
 from recon.geometry import ViewGeometry
@@ -331,15 +332,7 @@ def _format_varied(result: dict) -> str:
                 f"{f['centerline_rms_px_p90']:>8.3f}{f['radius_bias_pct']:>+9.2f}"
                 f"{f['radius_mae_px']:>9.3f}{f['trace_ms']:>9.0f}")
 
-    for name, f in result["chains"].items():
-        lines.append(line(name, f))
-    lines.append("-" * len(head))
-    lines.append(line("overall", result["overall"]))
-    lines.append("")
-    lines.append("by anatomy")
-    for name, f in result["anatomy"].items():
-        lines.append(line(name, f))
-    lines.append("")
+    lines += varied_rows(result, line, "-" * len(head))
     for r in result["failures"]:
         what = r.get("error") or (f"lost {r['lost_px']:.0f} px of the truth "
                                   f"(max gap {r['truth_max_gap_px']:.1f} px)")

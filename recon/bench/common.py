@@ -15,10 +15,12 @@ For the varied suite (:func:`recon.synth.suites.varied_cases`): the
 in-memory angiogram a chain's file would give (:func:`case_angiogram`),
 jittered clicks (:func:`jitter_seeds`), the RMS after a rigid alignment to
 the truth (:func:`rigid_rms_mm`) and a small process pool
-(:func:`parallel_map`).
+(:func:`parallel_map`), and the body of a per-chain table (:func:`varied_rows`).
 """
 
 from __future__ import annotations
+
+from collections.abc import Callable
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -37,6 +39,7 @@ __all__ = [
     "parallel_map",
     "median",
     "percentile",
+    "varied_rows",
 ]
 
 #: The presets a benchmark cycles through, case k using PRESET_CYCLE[k % 4].
@@ -206,3 +209,12 @@ def percentile(values, q: float) -> float:
     """q-th percentile of finite values (NaN when there are none)."""
     v = np.asarray([x for x in values if x is not None and np.isfinite(x)], dtype=float)
     return float(np.percentile(v, q)) if len(v) else float("nan")
+
+
+def varied_rows(result: dict, line: Callable[[str, dict], str], rule: str) -> list[str]:
+    """The body of a varied-suite table: a ``line`` per chain, ``rule``, the overall
+    line, then a line per anatomy variant, and a blank line."""
+    rows = [line(name, f) for name, f in result["chains"].items()]
+    rows += [rule, line("overall", result["overall"]), "", "by anatomy"]
+    rows += [line(name, f) for name, f in result["anatomy"].items()]
+    return [*rows, ""]

@@ -42,6 +42,7 @@ from recon.bench.common import (
     percentile,
     pose_error,
     rigid_rms_mm,
+    varied_rows,
 )
 from recon.geometry import ViewGeometry
 from recon.pipeline import ReconstructionOptions, reconstruct_pair
@@ -509,13 +510,7 @@ def _format_varied(result: dict) -> str:
                 f"{f['max_centerline_3d_rms_rigid_mm']:>7.2f}{f['cases_above_rigid_limit']:>5}"
                 f"{f['flagged_cases']:>5}{f['median_pipeline_ms']:>7.0f}")
 
-    for name, f in result["chains"].items():
-        lines.append(line(name, f))
-    lines.append("-" * len(head))
-    lines.append(line("overall", result["overall"]))
-    lines += ["", "by anatomy"]
-    lines += [line(name, f) for name, f in result["anatomy"].items()]
-    lines.append("")
+    lines += varied_rows(result, line, "-" * len(head))
     for f in result["failures"]:
         lines.append(f"FAILED {f['chain']} {f['preset']}/{f['seed']} {f['anatomy']}: {f['error']}")
     if result.get("stability"):

@@ -138,7 +138,8 @@ def test_real_static_phantom_pair(tmp_path):
 def test_views_closer_than_25_deg_are_refused_unless_allowed() -> None:
     from dataclasses import replace
 
-    from recon.pipeline import MIN_VIEW_SEPARATION_DEG, _check_separation
+    from recon.geometry import MIN_VIEW_SEPARATION_DEG
+    from recon.pipeline import _check_separation
 
     a = ViewGeometry(alpha_deg=30.0, beta_deg=0.0, sid_mm=1000.0, sod_mm=750.0,
                      pixel_spacing_mm=(0.3, 0.3), rows=512, cols=512)
