@@ -20,7 +20,7 @@ from recon.errors import CoronaryError
 
 EXIT_USER_ERROR = 2
 
-BENCHES = ("centerline", "calibration", "matching", "reconstruct")
+BENCHES = ("centerline", "calibration", "matching", "reconstruct", "speed")
 
 
 class _Parser(argparse.ArgumentParser):
@@ -252,7 +252,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--cases",
         type=_COUNT,
         help="number of cases (per geometry for calibration, per imaging chain for "
-        "--suite varied)",
+        "--suite varied; repetitions for speed)",
     )
     p.add_argument("--seed", type=_number(int, 0, 2**32 - 1), default=0)
     p.add_argument(

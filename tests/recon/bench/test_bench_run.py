@@ -11,7 +11,7 @@ import pytest
 from recon.bench.common import pose_error
 from recon.synth import make_phantom
 
-BENCHES = ("centerline", "calibration", "matching", "reconstruct")
+BENCHES = ("centerline", "calibration", "matching", "reconstruct", "speed")
 
 
 #: Parameters after (cases, seed): the suite for the benches that take --suite varied,
