@@ -35,7 +35,6 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.signal import savgol_filter
 
 FloatArray = NDArray[np.float64]
 
@@ -127,7 +126,29 @@ def _smooth(s_mm: FloatArray, values: FloatArray, smooth_mm: float) -> FloatArra
     window = min(window, n if n % 2 else n - 1)
     if window < 5:
         return values.copy()
-    return savgol_filter(values, window, 3, mode="interp")
+    return savgol_cubic(values, window)
+
+
+def savgol_cubic(values: FloatArray, window: int) -> FloatArray:
+    """Savitzky-Golay smoothing of (N,) values with a cubic over an odd ``window`` <= N.
+
+    Each output is the least-squares cubic through the ``window`` samples centred
+    on it, evaluated at its centre; within half a window of an end, the cubic
+    through the first (last) ``window`` samples evaluated there (the "interp"
+    edges of ``scipy.signal.savgol_filter``, which this equals; written out so
+    that measuring does not import scipy.signal and scipy.stats).
+    """
+    values = np.asarray(values, dtype=float)
+    half = window // 2
+    z = np.arange(window, dtype=float) - half
+    vander = z[:, None] ** np.arange(4)  # (window, 4)
+    hat = vander @ np.linalg.pinv(vander)  # (window, window): samples -> fitted values
+    out = np.empty_like(values)
+    out[half:len(values) - half] = np.lib.stride_tricks.sliding_window_view(
+        values, window) @ hat[half]
+    out[:half] = hat[:half] @ values[:window]
+    out[len(values) - half:] = hat[window - half:] @ values[-window:]
+    return out
 
 
 def _lesion_extent(s_mm: FloatArray, deficit: FloatArray, peak: int) -> tuple[float, float]:

@@ -124,3 +124,19 @@ def test_a_fading_trace_end_is_not_taken_for_the_lesion():
     m = measure_lumen(lumen_profile(s, np.pi * faded**2))
     assert abs(m.mld_s_mm - 45.0) < 1.0
     assert m.lesion_end_s_mm < s[-1] - 10.0
+
+
+@pytest.mark.parametrize("n, window", [(5, 5), (9, 5), (40, 11), (41, 41), (400, 61), (401, 399)])
+def test_savgol_cubic_equals_scipy_savgol_filter(n: int, window: int) -> None:
+    from scipy.signal import savgol_filter
+
+    from recon.measure import savgol_cubic
+
+    rng = np.random.default_rng(n * 1000 + window)
+    s = np.linspace(0.0, 3.0, n)
+    values = 2.5 + np.sin(3.0 * s) + 0.4 * s**2 + 0.05 * rng.standard_normal(n)
+    expected = savgol_filter(values, window, 3, mode="interp")
+    assert np.allclose(savgol_cubic(values, window), expected, rtol=0.0, atol=1e-9)
+    # a cubic passes through unchanged, edges included
+    cubic = 1.0 - 2.0 * s + 0.5 * s**2 - 0.3 * s**3
+    assert np.allclose(savgol_cubic(cubic, window), cubic, rtol=0.0, atol=1e-9)
