@@ -7,8 +7,11 @@ change in the machine's load falls on all of them alike):
   job really needs (:data:`FLOOR_IMPORTS`, fixed here so that it cannot
   drift with the code) and exits;
 - ``cold``: ``coronary3d reconstruct --demo`` as a fresh process (imports,
-  reading the DICOM files, the pipeline, writing the outputs), wall time
-  and its peak resident memory (``ru_maxrss`` of that child);
+  reading the DICOM files, the pipeline, writing the outputs: ``python -c``
+  running ``recon.cli`` as ``__main__``), its wall time and its peak
+  resident memory (the process's ``VmHWM``, written at its exit);
+- both children's CPU time (user + system) as well, which a shared
+  machine's load disturbs less than their wall time;
 - ``warm``: :func:`recon.pipeline.reconstruct_pair` in this process on the
   already loaded demo angiograms, its total and its per-stage
   ``timings_ms`` (the vesselness maps are part of ``trace``);
@@ -63,7 +66,7 @@ def _child_env() -> dict[str, str]:
 
 
 def _run_child(argv: list[str], env: dict[str, str]) -> tuple[float, float]:
-    """(wall s, peak resident MB) of one child process; raises if it fails."""
+    """(wall s, CPU s: user + system) of one child process; raises if it fails."""
     t0 = time.perf_counter()
     proc = subprocess.Popen(argv, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     _, status, usage = os.wait4(proc.pid, 0)
@@ -75,8 +78,21 @@ def _run_child(argv: list[str], env: dict[str, str]) -> tuple[float, float]:
     if proc.returncode != 0:
         raise RuntimeError(f"{' '.join(argv[:4])}... exited {proc.returncode}: "
                            f"{stderr.strip().splitlines()[-1:]}")
-    peak_mb = usage.ru_maxrss / 1024.0  # kB on Linux
-    return wall_s, peak_mb
+    return wall_s, usage.ru_utime + usage.ru_stime
+
+
+#: ``python -c`` body that runs ``python -m recon.cli ...`` and, at exit, writes the
+#: process's peak resident memory (VmHWM, kB) to the file named by $CORONARY3D_PEAK_FILE.
+#: (The child's ``ru_maxrss`` would not do: it keeps the peak of the forked copy of this
+#: large benchmark process from before the exec.)
+_COLD_MAIN = """import atexit, os, runpy
+def _peak():
+    text = open('/proc/self/status').read()
+    kb = [line.split()[1] for line in text.splitlines() if line.startswith('VmHWM:')]
+    open(os.environ['CORONARY3D_PEAK_FILE'], 'w').write(kb[0] if kb else '')
+atexit.register(_peak)
+runpy.run_module('recon.cli', run_name='__main__', alter_sys=True)
+"""
 
 
 def _feature_click_px(app) -> tuple[float, float]:
@@ -100,12 +116,16 @@ def run(cases: int | None = None, seed: int = 0) -> dict:
 
     floor_s: list[float] = []
     cold_s: list[float] = []
+    floor_cpu_s: list[float] = []
+    cold_cpu_s: list[float] = []
     peak_mb: list[float] = []
     warm_ms: list[float] = []
     stages: dict[str, list[float]] = {}
     viewer_ms: list[float] = []
     click_ms: list[float] = []
     with tempfile.TemporaryDirectory(prefix="coronary3d-bench-speed-") as tmp:
+        peak_file = Path(tmp) / "peak_kb.txt"
+        cold_env = {**env, "CORONARY3D_PEAK_FILE": str(peak_file)}
         app = ViewerApp(port=0, autosave_path=Path(tmp) / "autosave.json")
         try:
             app.wait_ready()
@@ -113,14 +133,16 @@ def run(cases: int | None = None, seed: int = 0) -> dict:
             app.reconstruct()
             click_px = _feature_click_px(app)
             for _ in range(reps):
-                wall, _peak = _run_child([sys.executable, "-c", f"import {FLOOR_IMPORTS}"], env)
+                wall, cpu = _run_child([sys.executable, "-c", f"import {FLOOR_IMPORTS}"], env)
                 floor_s.append(wall)
+                floor_cpu_s.append(cpu)
 
-                wall, peak = _run_child([sys.executable, "-m", "recon.cli", "reconstruct",
-                                         "--demo", "--quiet", "--out", str(Path(tmp) / "out")],
-                                        env)
+                wall, cpu = _run_child([sys.executable, "-c", _COLD_MAIN, "reconstruct",
+                                        "--demo", "--quiet", "--out", str(Path(tmp) / "out")],
+                                       cold_env)
                 cold_s.append(wall)
-                peak_mb.append(peak)
+                cold_cpu_s.append(cpu)
+                peak_mb.append(float(peak_file.read_text()) / 1024.0)
 
                 rec = reconstruct_pair(angio_a, angio_b, seeds)
                 for name, ms in rec.timings_ms.items():
@@ -157,9 +179,15 @@ def run(cases: int | None = None, seed: int = 0) -> dict:
         "viewer_reconstruct_ms": float(np.median(viewer_ms)),
         "click_ms": float(np.median(click_ms)),
         "peak_mb": float(np.median(peak_mb)),
+        # CPU time (user + system) of the children: steadier than wall time on a shared machine
+        "floor_cpu_s": float(np.median(floor_cpu_s)),
+        "cold_cpu_s": float(np.median(cold_cpu_s)),
+        "cold_over_floor_cpu": float(np.median(cold_cpu_s) / np.median(floor_cpu_s)),
         "runs": {
             "floor_s": floor_s,
             "cold_s": cold_s,
+            "floor_cpu_s": floor_cpu_s,
+            "cold_cpu_s": cold_cpu_s,
             "peak_mb": peak_mb,
             "warm_ms": warm_ms,
             "stages_ms": stages,
@@ -184,6 +212,9 @@ def format_table(result: dict) -> str:
         ("floor_s", "s", runs["floor_s"]),
         ("cold_s", "s", runs["cold_s"]),
         ("cold_over_floor", "", None),
+        ("floor_cpu_s", "s", runs["floor_cpu_s"]),
+        ("cold_cpu_s", "s", runs["cold_cpu_s"]),
+        ("cold_over_floor_cpu", "", None),
         ("warm_ms", "ms", runs["warm_ms"]),
         ("viewer_reconstruct_ms", "ms", runs["viewer_reconstruct_ms"]),
         ("click_ms", "ms", runs["click_ms"]),
