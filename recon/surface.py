@@ -51,6 +51,11 @@ _SIN_PARALLEL_HI = np.sin(np.deg2rad(25.0))
 _MIN_RADIUS_MM = 0.05
 _MAX_GRID_VOXELS = 12_000_000
 _CHUNK = 400_000
+_MC_BLOCK = 16  # cells along each edge of a marching-cubes block
+# Voxels: one grid edge's vertex as given by two blocks differs by the float32 rounding of
+# skimage's block-local coordinates (< 2e-6); two distinct vertices are > 5e-5 apart
+# (the field is nudged 1e-4 voxel off the level, the band is 2 voxels).
+_WELD_TOL = 1e-5
 
 
 @dataclass(frozen=True, eq=False)
@@ -416,6 +421,57 @@ def _shell_voxels(
     return np.flatnonzero(outer & ~inner), np.flatnonzero(inner)
 
 
+def _marching_cubes_on_blocks(
+    grid: NDArray[np.float32], wall: NDArray[np.int64]
+) -> tuple[FloatArray, NDArray[np.int64]]:
+    """Marching cubes (skimage's Lewiner) of the 0-level of ``grid``, on the blocks the
+    surface crosses only.
+
+    The cells are split into blocks of :data:`_MC_BLOCK`^3; the blocks that have a
+    corner among the ``wall`` voxels (flat indices; every other voxel is a constant
+    +-band, so a sign change needs a wall voxel) and both signs are run one by one,
+    and the vertex that two neighbouring blocks both put on their shared grid edge
+    is welded into one. The result is the mesh of one call over the whole grid:
+    each cell's triangles depend on its 8 corners only.
+
+    Returns (vertices (V, 3) in voxel index units, faces (F, 3)).
+    """
+    n_cells = np.asarray(grid.shape) - 1
+    n_blocks = -(-n_cells // _MC_BLOCK)
+    occupied = np.zeros(n_blocks, dtype=bool)
+    corner = np.unravel_index(wall, grid.shape)
+    block_of = [np.minimum(c // _MC_BLOCK, n - 1) for c, n in zip(corner, n_blocks, strict=True)]
+    occupied[tuple(block_of)] = True
+    # A voxel on a block's lower face is also a corner of the cells of the block below.
+    occupied[:-1] |= occupied[1:]
+    occupied[:, :-1] |= occupied[:, 1:]
+    occupied[:, :, :-1] |= occupied[:, :, 1:]
+    verts: list[FloatArray] = []
+    faces: list[NDArray[np.int64]] = []
+    n_verts = 0
+    for start in np.argwhere(occupied) * _MC_BLOCK:
+        stop = np.minimum(start + _MC_BLOCK, n_cells) + 1  # corners of the block's cells
+        sub = grid[start[0]:stop[0], start[1]:stop[1], start[2]:stop[2]]
+        if not sub.min() < 0.0 < sub.max():
+            continue
+        v, f, _, _ = marching_cubes(sub, level=0.0)
+        verts.append(v.astype(np.float64) + start)
+        faces.append(f.astype(np.int64) + n_verts)
+        n_verts += len(v)
+    if not verts:
+        raise ValueError("the distance field has no surface (no sign change on the grid)")
+    all_verts = np.concatenate(verts)
+    all_faces = np.concatenate(faces)
+    # Weld: a vertex shared by 2-4 blocks takes the lowest index of its copies.
+    pairs = cKDTree(all_verts).query_pairs(_WELD_TOL, output_type="ndarray")
+    label = np.arange(len(all_verts))
+    if len(pairs):
+        np.minimum.at(label, pairs[:, 1], pairs[:, 0])
+    kept = label == np.arange(len(all_verts))
+    new_index = (np.cumsum(kept) - 1)[label]
+    return all_verts[kept], new_index[all_faces]
+
+
 def _repair(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
     """Largest component, no degenerate faces, outward winding."""
     mesh.update_faces(mesh.nondegenerate_faces())
@@ -484,16 +540,17 @@ def build_surface(
         chunk = shell[start : start + _CHUNK]
         ijk = np.stack(np.unravel_index(chunk, shape), axis=1)
         grid[chunk] = _tube_sdf(lo + ijk * voxel, sections, tree)
+    # Nudge exact zeros off the level (only the shell holds values other than +-band).
+    tiny = np.float32(1e-4 * voxel)
+    grid[shell[np.abs(grid[shell]) < tiny]] = tiny
     grid = grid.reshape(shape)
-    # Keep the outer layer outside so the surface closes; nudge exact zeros off the level.
+    # Keep the outer layer outside so the surface closes.
     grid[[0, -1], :, :] = band
     grid[:, [0, -1], :] = band
     grid[:, :, [0, -1]] = band
-    tiny = np.float32(1e-4 * voxel)
-    grid[np.abs(grid) < tiny] = tiny
 
-    verts, faces, _, _ = marching_cubes(grid, level=0.0, spacing=(voxel, voxel, voxel))
-    mesh = trimesh.Trimesh(vertices=verts + lo, faces=faces, process=True)
+    verts, faces = _marching_cubes_on_blocks(grid, shell)
+    mesh = trimesh.Trimesh(vertices=verts * voxel + lo, faces=faces, process=True)
     mesh = _repair(mesh)
     return SurfaceResult(mesh=mesh, sections=sections, point_cloud=cloud, voxel_mm=voxel)
 

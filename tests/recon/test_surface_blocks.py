@@ -1,0 +1,67 @@
+"""Marching cubes on the blocks the surface crosses gives the mesh of one call over the grid."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import trimesh
+from scipy.spatial import cKDTree
+from skimage.measure import marching_cubes
+
+import recon.surface as surface
+
+
+def _bent_tube_field(shape: tuple[int, int, int], band: float,
+                     wall_halfwidth: float) -> tuple[np.ndarray, np.ndarray]:
+    """A torus section's signed distance where it is below ``wall_halfwidth`` (voxels) in
+    magnitude, +-band elsewhere, like build_surface's grid (exact values on a shell,
+    only the sign off it), nudged off 0; returns (grid, flat indices of the shell)."""
+    i, j, k = np.meshgrid(*(np.arange(n, dtype=float) for n in shape), indexing="ij")
+    ring = np.hypot(i - 3.0, j - 3.0) - 0.6 * min(shape[:2])  # a quarter ring about (3, 3)
+    sdf = np.hypot(ring, k - shape[2] / 2.0) - 4.3
+    # 1-Lipschitz: a cell's corners are within sqrt(3) of each other, so with a half-width
+    # above sqrt(3) / 2 every sign change still has a shell corner
+    grid = np.where(np.abs(sdf) < wall_halfwidth, sdf, np.sign(sdf) * band).astype(np.float32)
+    grid[[0, -1]] = band
+    grid[:, [0, -1]] = band
+    grid[:, :, [0, -1]] = band
+    tiny = np.float32(1e-4)
+    grid[np.abs(grid) < tiny] = tiny
+    wall = np.flatnonzero(np.abs(sdf.ravel()) < wall_halfwidth)
+    return grid, wall
+
+
+def _triangles(faces: np.ndarray) -> set[tuple[int, int, int]]:
+    """Each face rotated to start at its smallest vertex index (so that the winding counts)."""
+    start = np.argmin(faces, axis=1)
+    rolled = np.stack([faces[np.arange(len(faces)), (start + k) % 3] for k in range(3)], axis=1)
+    return {tuple(int(i) for i in row) for row in rolled}
+
+
+@pytest.mark.parametrize("wall_halfwidth", [0.9, 2.0])
+@pytest.mark.parametrize("block", [3, 5, 16])
+def test_block_marching_cubes_equals_one_call_over_the_grid(
+    block: int, wall_halfwidth: float, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    grid, wall = _bent_tube_field((30, 34, 17), band=2.0, wall_halfwidth=wall_halfwidth)
+    monkeypatch.setattr(surface, "_MC_BLOCK", block)
+    verts, faces = surface._marching_cubes_on_blocks(grid, wall)
+    ref_verts, ref_faces, _, _ = marching_cubes(grid, level=0.0)
+
+    assert len(verts) == len(ref_verts) and len(faces) == len(ref_faces)
+    # the same vertices up to skimage's float32 coordinates (global in the one call,
+    # block-local here), and the same triangles with the same winding
+    dist, same = cKDTree(ref_verts).query(verts)
+    assert dist.max() < 1e-5
+    assert len(np.unique(same)) == len(ref_verts)
+    assert _triangles(same[faces]) == _triangles(ref_faces)
+    mesh = trimesh.Trimesh(verts, faces, process=False)
+    ref = trimesh.Trimesh(ref_verts, ref_faces, process=False)
+    assert mesh.is_watertight and ref.is_watertight
+    assert mesh.volume == pytest.approx(ref.volume, rel=1e-6)
+
+
+def test_block_marching_cubes_without_a_surface_is_refused() -> None:
+    grid = np.full((10, 10, 10), 2.0, dtype=np.float32)
+    with pytest.raises(ValueError, match="no surface"):
+        surface._marching_cubes_on_blocks(grid, np.arange(10))
