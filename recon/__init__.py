@@ -47,6 +47,14 @@ _EXPORTS = {
 
 __all__ = ["__version__", *_EXPORTS]
 
+
+def __getattr__(name: str) -> Any:
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f"module 'recon' has no attribute {name!r}")
+    return getattr(importlib.import_module(module), name)
+
+
 #: Modules imported at start-up by a library but used only on a path that a
 #: reconstruction does not take: requests and tqdm, imported by pydicom's helper that
 #: downloads its test files (``pydicom.data.download``). Each is imported on the first

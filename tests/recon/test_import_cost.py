@@ -44,3 +44,12 @@ def test_requests_and_tqdm_wait_for_their_first_use_and_then_are_the_real_module
     ])
     result = _run(code)
     assert result.returncode == 0, result.stderr
+
+
+def test_the_package_still_re_exports_its_api_on_first_use() -> None:
+    import recon
+    from recon.geometry import ViewGeometry
+
+    assert recon.ViewGeometry is ViewGeometry
+    for name in recon.__all__:
+        assert getattr(recon, name) is not None, name
