@@ -97,14 +97,16 @@ def carina_s_mm(branch_X: FloatArray, parent_X: FloatArray, parent_radius_mm: Fl
     """Arc length (mm) along the branch where its centerline leaves the parent's lumen.
 
     branch_X (N, 3) from the bifurcation; parent_X (P, 3) with radii (P,).
-    The branch's end when it never leaves (the whole branch inside).
+    Sought over the branch's first 4 r_max + 2 mm (r_max the parent's
+    largest radius); the end of that stretch when the branch has not left
+    by then (a branch running inside its parent).
     """
     s_b = arclength(branch_X)
     window = s_b <= min(s_b[-1], 4.0 * float(np.max(parent_radius_mm)) + 2.0)
     d, s_foot = _distance_to_polyline(branch_X[window], parent_X)
     r_local = np.interp(s_foot, arclength(parent_X), parent_radius_mm)
     outside = np.flatnonzero(d > r_local)
-    return float(s_b[window][outside[0]]) if outside.size else float(s_b[-1])
+    return float(s_b[window][outside[0]] if outside.size else s_b[window][-1])
 
 
 @dataclass(frozen=True, eq=False)

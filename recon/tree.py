@@ -1,8 +1,8 @@
 """The vessel tree: every segment of the seeds in one reconstruction.
 
     trace every segment in both views -> calibrate view B once on the whole
-    tree (every segment's ends, every feature; with two or more segments
-    also the matched centerline points of all of them, robust loss)
+    tree (every segment's ends, every feature; with self-calibration also
+    the matched centerline points of all of them, robust loss)
     -> per segment, parents first: the stages of ``reconstruct_pair``
        (matching, triangulation, sections, QCA) with the tree's calibration,
        a branch joined to its parent at the bifurcation
@@ -40,7 +40,12 @@ from recon.seeds import Seeds, Segment
 from recon.surface import TreeSurface, build_tree_surface
 from recon.types import Angiogram, Centerline2D
 
-__all__ = ["TreeReconstruction", "reconstruct_tree", "MATCHED_POINTS_PER_BRANCH"]
+__all__ = [
+    "TreeReconstruction",
+    "reconstruct_tree",
+    "tree_calibration",
+    "MATCHED_POINTS_PER_BRANCH",
+]
 
 #: Matched centerline pairs per branch that join the tree-wide calibration.
 MATCHED_POINTS_PER_BRANCH = 60
@@ -128,15 +133,17 @@ def tree_calibration(angio_a: Angiogram, angio_b: Angiogram, seeds: Seeds,
                      options: ReconstructionOptions) -> CalibrationResult:
     """View B calibrated on the whole tree.
 
-    The features (every segment's ends, every feature) first (eq. 5); with
-    two or more segments the matched centerline points of all of them
-    (:data:`MATCHED_POINTS_PER_BRANCH` each, matched under that first pose)
-    are added with the robust loss (:func:`recon.calibration.refine_with_matches`).
+    The features: every segment's ends and every feature (eq. 5). With
+    ``options.self_calibration`` and two or more segments the matched
+    centerline points of all of them (:data:`MATCHED_POINTS_PER_BRANCH`
+    each, matched under that first pose) are added with the robust loss
+    (:func:`recon.calibration.refine_with_matches`); off by default, as for
+    one segment (docs/benchmarks.md, the tree suite, has the measurement).
     """
     view_a, view_b = angio_a.geometry, angio_b.geometry
     feat_a, feat_b = _tree_features(seeds, traced)
     cal = calibrate(view_a, view_b, feat_a, feat_b, method=options.optimizer)
-    if len(traced) < 2 or options.optimizer != "palm":
+    if len(traced) < 2 or options.optimizer != "palm" or not options.self_calibration:
         return cal
     matched_a, matched_b = [], []
     for cl_a, cl_b in traced:

@@ -26,6 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from recon.bifurcation import carina_s_mm
 from recon.bifurcation import nearest_on_polyline as nearest_on_polyline_3d
 from recon.geometry import ViewGeometry, rotation_from_rotvec
 from recon.seeds import Seeds, Segment
@@ -498,15 +499,16 @@ def _main_reference_radius(tree: TreeDraw, s_mm: float) -> float:
 
 
 
-def _ostium_bump(tree: TreeDraw, s_b: FloatArray, k: int) -> FloatArray:
+def _ostium_bump(tree: TreeDraw, s_b: FloatArray, k: int, main_X: FloatArray,
+                 main_r: FloatArray) -> FloatArray:
     """(N,) raised-cosine profile (peak 1) of an ostial lesion on branch k at arc lengths s_b.
 
-    It starts :data:`OSTIUM_START_MM` beyond the parent's wall (the main
-    radius at the origin), so it lies outside the main lumen, and is
-    :data:`OSTIUM_LENGTH_MM` long.
+    It starts :data:`OSTIUM_START_MM` beyond the branch's carina (where its
+    centerline leaves the main lumen: main_X (M, 3), main_r (M,)), so it
+    lies outside the main lumen, and is :data:`OSTIUM_LENGTH_MM` long.
     """
-    r_origin = _main_reference_radius(tree, float(tree.branch_s[k]))
-    centre = r_origin + OSTIUM_START_MM + OSTIUM_LENGTH_MM / 2
+    s_c = carina_s_mm(tree.branches_X[k], main_X, main_r)
+    centre = s_c + OSTIUM_START_MM + OSTIUM_LENGTH_MM / 2
     x = (s_b - centre) / OSTIUM_LENGTH_MM
     return np.where(np.abs(x) < 0.5, 0.5 * (1.0 + np.cos(2 * np.pi * x)), 0.0)
 
@@ -535,7 +537,8 @@ def truth_from_tree(
         sb = np.arange(len(Xb)) * SAMPLE_STEP_MM
         rb = rb0 + (rb1 - rb0) * sb / sb[-1]
         if k == k_ostium and side_stenosis_pct > 0:
-            rb = rb * (1.0 - side_stenosis_pct / 100.0 * _ostium_bump(tree, sb, k))
+            bump = _ostium_bump(tree, sb, k, main_X, r_main)
+            rb = rb * (1.0 - side_stenosis_pct / 100.0 * bump)
         vessels.append((Xb, rb))
         names.append(f"branch {k + 1}")
         branch_names.append(f"bifurcation {k + 1}")

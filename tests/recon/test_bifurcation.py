@@ -24,7 +24,7 @@ def _y(theta_deg: float, r_parent: float = 1.5):
     """A straight parent along x (60 mm) and a branch leaving it at x = 30 at theta."""
     parent = _line([0, 0, 0], [1, 0, 0], 60.0)
     t = np.deg2rad(theta_deg)
-    branch = _line([30, 0, 0], [np.cos(t), np.sin(t), 0.3 * 0], 30.0)
+    branch = _line([30, 0, 0], [np.cos(t), np.sin(t), 0.0], 30.0)
     return parent, np.full(len(parent), r_parent), branch
 
 
@@ -43,7 +43,8 @@ def test_the_join_moves_the_start_onto_the_parent_and_keeps_the_branch_beyond_th
     parent, r, branch = _y(45.0)
     off = branch + np.array([0.0, 0.0, 0.6])  # triangulated 0.6 mm off the parent
     T = np.gradient(off, axis=0)
-    cl = Centerline3D(X_world=off, s_mm=arclength(off), tangents=T / np.linalg.norm(T, axis=1)[:, None],
+    T /= np.linalg.norm(T, axis=1)[:, None]
+    cl = Centerline3D(X_world=off, s_mm=arclength(off), tangents=T,
                       radius_a_mm=np.ones(len(off)), radius_b_mm=np.ones(len(off)),
                       X_raw_world=off, points_a_px=np.zeros((len(off), 2)),
                       points_b_px=np.zeros((len(off), 2)))
