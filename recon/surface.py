@@ -514,8 +514,11 @@ class TreeSurface:
     Attributes
     ----------
     mesh : watertight triangle mesh of the union, world mm, outward normals.
-    components : connected pieces marching cubes produced (1 for a tree
+    components : separate pieces marching cubes produced (1 for a tree
         whose branches meet; the mesh keeps the largest).
+    cavities : closed surfaces marching cubes left inside the union (a
+        voxel or two the sampled distance field put outside; dropped from
+        the mesh, counted here).
     voxel_mm : grid edge used.
     grid_voxels : voxels of the (dense, float32) distance grid.
     """
@@ -524,6 +527,7 @@ class TreeSurface:
     components: int
     voxel_mm: float
     grid_voxels: int
+    cavities: int = 0
 
 
 def build_tree_surface(
@@ -579,8 +583,24 @@ def build_tree_surface(
     verts, faces, _, _ = marching_cubes(grid, level=0.0, spacing=(voxel, voxel, voxel))
     del grid
     mesh = trimesh.Trimesh(vertices=verts + lo, faces=faces, process=True)
-    labels = trimesh.graph.connected_component_labels(mesh.face_adjacency, len(mesh.faces))
-    components = int(labels.max()) + 1 if labels.size else 0
+    components, cavities = _pieces(mesh)
     mesh = _repair(mesh)
     return TreeSurface(mesh=mesh, components=components, voxel_mm=float(voxel),
-                       grid_voxels=int(np.prod(shape)))
+                       grid_voxels=int(np.prod(shape)), cavities=cavities)
+
+
+def _pieces(mesh: trimesh.Trimesh) -> tuple[int, int]:
+    """(separate pieces, inner cavities) of a marching-cubes mesh.
+
+    Marching cubes winds every closed surface the same way about the inside,
+    so an outer piece has a signed volume of the largest piece's sign and a
+    cavity (an outside pocket within the inside) the opposite sign.
+    """
+    labels = trimesh.graph.connected_component_labels(mesh.face_adjacency, len(mesh.faces))
+    if not labels.size:
+        return 0, 0
+    v0, v1, v2 = (mesh.vertices[mesh.faces[:, k]] for k in range(3))
+    signed = np.bincount(labels, weights=np.einsum("ij,ij->i", v0, np.cross(v1, v2)) / 6.0)
+    largest = int(np.argmax(np.bincount(labels)))
+    outer = np.sign(signed) == np.sign(signed[largest])
+    return int(np.count_nonzero(outer)), int(np.count_nonzero(~outer))

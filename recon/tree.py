@@ -110,6 +110,7 @@ class TreeReconstruction:
                 "faces": int(len(mesh.faces)),
                 "watertight": bool(mesh.is_watertight),
                 "components": self.tree_surface.components,
+                "cavities_removed": self.tree_surface.cavities,
                 "volume_mm3": float(mesh.volume),
                 "voxel_mm": self.tree_surface.voxel_mm,
             },

@@ -234,3 +234,17 @@ def test_tree_surface_of_two_apart_vessels_has_two_components():
     b = centerline_3d(straight(length=20.0, direction=(1, 0, 0), origin=(0, 8, 0)), 1.0)
     sections = [elliptic_cross_sections(c, VIEW_A, VIEW_B) for c in (a, b)]
     assert build_tree_surface(sections, voxel_mm=0.25).components == 2
+
+
+def test_pieces_tells_a_second_vessel_from_a_cavity_inside_the_first():
+    import trimesh
+
+    from recon.surface import _pieces
+
+    outer = trimesh.creation.icosphere(radius=3.0)
+    pocket = trimesh.creation.icosphere(radius=0.5)
+    pocket.invert()  # wound like an outside pocket within the inside
+    apart = trimesh.creation.icosphere(radius=1.0)
+    apart.apply_translation([10.0, 0.0, 0.0])
+    assert _pieces(trimesh.util.concatenate([outer, pocket])) == (1, 1)
+    assert _pieces(trimesh.util.concatenate([outer, apart])) == (2, 0)
