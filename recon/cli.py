@@ -424,8 +424,8 @@ def _segment_choice(text: str | None, seeds, seeds_path: str) -> int | None | bo
     if text.strip().isdigit() and int(text) < len(names):
         return int(text)
     shown = ", ".join(repr(n) for n in names[:10]) or "none"
-    print(f"coronary3d: error: {seeds_path}: no segment {text!r} (segments: {shown}; or an "
-          f"index from 0 to {len(names) - 1})", file=sys.stderr)
+    print(f"coronary3d: error: argument --segment: no segment {text!r} in {seeds_path} "
+          f"(segments: {shown}; or an index from 0 to {len(names) - 1})", file=sys.stderr)
     return False
 
 
