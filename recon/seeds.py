@@ -58,8 +58,10 @@ class Segment:
     name: str
     a_px: tuple[tuple[float, float], ...]
     b_px: tuple[tuple[float, float], ...]
-    parent: str | None = None
-    bifurcation: str | None = None
+    # repr=False: a root segment's repr is what it was before the tree (the
+    # phantom's regression hashes include the seeds' repr)
+    parent: str | None = field(default=None, repr=False)
+    bifurcation: str | None = field(default=None, repr=False)
 
     @property
     def is_branch(self) -> bool:
