@@ -156,9 +156,11 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser(
         "reconstruct",
         help="run the whole pipeline headless and write centerline, mesh and report",
-        description="Load two angiograms, trace the segment clicked in seeds.json in each "
-        "view, calibrate view B (PALM), match points (CBOCD + dynamic programming), "
-        "triangulate, build the surface and measure the narrowing. Writes "
+        description="Load two angiograms, trace every segment clicked in seeds.json (the "
+        "vessel tree: branches join their parent at the bifurcation) in each "
+        "view, calibrate view B (PALM) on the whole tree, match points (CBOCD + dynamic "
+        "programming), triangulate, build the surface and measure the narrowing and the "
+        "bifurcations. Writes "
         "DIR/centerline.csv, DIR/centerline.vtp, DIR/mesh.stl (or --format) and "
         "DIR/report.json; with --sr also DIR/measurements-sr.dcm.",
     )
@@ -172,8 +174,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--format", default="stl", help="mesh formats, comma separated: stl,obj,ply,glb")
     p.add_argument("--frame-a", type=_INDEX, help="frame of view A (0-based) for a cine")
     p.add_argument("--frame-b", type=_INDEX, help="frame of view B (0-based) for a cine")
-    p.add_argument("--segment", type=_INDEX, default=0,
-                   help="which segment of seeds.json (0-based)")
+    p.add_argument("--segment", default=None, metavar="NAME|INDEX",
+                   help="reconstruct only this segment of seeds.json (its name, or its "
+                   "0-based index); default: every segment, as one tree")
     p.add_argument(
         "--self-calibration",
         action="store_true",
@@ -257,11 +260,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=_number(int, 0, 2**32 - 1), default=0)
     p.add_argument(
         "--suite",
-        choices=("regular", "varied"),
+        choices=("regular", "varied", "tree"),
         default="regular",
         help="regular: the plain phantom (default); varied: every imaging chain (detector, "
         "mapping, blur, glare, noise, background, bit depth) x harder anatomy (centerline "
-        "and reconstruct only)",
+        "and reconstruct only); tree: phantom trees with bifurcation lesions, every branch "
+        "reconstructed (reconstruct only)",
     )
     p.add_argument(
         "--jitter",
@@ -334,6 +338,7 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
     from recon.io.outputs import write_outputs
     from recon.io.seeds_file import load_seeds
     from recon.pipeline import ReconstructionOptions, reconstruct_pair
+    from recon.tree import reconstruct_tree
 
     if args.demo:
         demo = demo_paths()
@@ -368,30 +373,60 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
         frames = (angio_a.frame_index + 1, angio_b.frame_index + 1)
         sr_sources = read_sr_sources(file_a, file_b, frames)
     seeds = load_seeds(seeds_path)
+    segment = _segment_choice(args.segment, seeds, seeds_path)
+    if segment is False:
+        return EXIT_USER_ERROR
     options = ReconstructionOptions(
         matcher=args.matcher,
         optimizer=args.optimizer,
-        segment=args.segment,
+        segment=segment or 0,
         self_calibration=args.self_calibration,
         intensity_a=args.intensity_a,
         intensity_b=args.intensity_b,
         allow_close_views=args.allow_close_views,
     )
-    rec = reconstruct_pair(angio_a, angio_b, seeds, options, progress=progress)
+    if segment is None:
+        rec = reconstruct_tree(angio_a, angio_b, seeds, options, progress=progress)
+        parts = [(seeds.segments[b.options.segment].name, b) for b in rec.branches]
+    else:
+        rec = reconstruct_pair(angio_a, angio_b, seeds, options, progress=progress)
+        parts = [(seeds.segments[segment].name, rec)]
     written = write_outputs(rec, Path(args.out), formats=formats, sr_sources=sr_sources)
     for line in rec.warnings:  # shown even with --quiet: they qualify the numbers
         print(f"coronary3d: warning: {line}", file=sys.stderr)
     if not args.quiet:
-        m = rec.measurements
-        print(
-            f"done in {(time.perf_counter() - t0):.2f} s: length {m.segment_length_mm:.1f} mm, "
-            f"MLD {m.mld_mm:.2f} mm, diameter stenosis {m.diameter_stenosis_pct:.0f} %, "
-            f"lesion {m.lesion_length_mm:.1f} mm",
-            file=sys.stderr,
-        )
+        print(f"done in {(time.perf_counter() - t0):.2f} s", file=sys.stderr)
+        for name, part in parts:
+            m = part.measurements
+            print(
+                f"{name}: length {m.segment_length_mm:.1f} mm, MLD {m.mld_mm:.2f} mm, "
+                f"diameter stenosis {m.diameter_stenosis_pct:.0f} %, "
+                f"lesion {m.lesion_length_mm:.1f} mm",
+                file=sys.stderr,
+            )
+        for bif in getattr(rec, "bifurcations", ()):
+            print(f"{bif.name}: bifurcation angle {bif.bifurcation_angle_deg:.0f} deg, "
+                  f"proximal angle {bif.proximal_angle_deg:.0f} deg, Medina {bif.medina}",
+                  file=sys.stderr)
     for path in written:
         print(path)
     return 0
+
+
+def _segment_choice(text: str | None, seeds, seeds_path: str) -> int | None | bool:
+    """--segment as an index into the seeds' segments (None: all of them; False, after
+    one line on stderr, when the name or index does not exist)."""
+    if text is None:
+        return None
+    names = [s.name for s in seeds.segments]
+    if text in names:
+        return names.index(text)
+    if text.strip().isdigit() and int(text) < len(names):
+        return int(text)
+    shown = ", ".join(repr(n) for n in names[:10]) or "none"
+    print(f"coronary3d: error: argument --segment: no segment {text!r} in {seeds_path} "
+          f"(segments: {shown}; or an index from 0 to {len(names) - 1})", file=sys.stderr)
+    return False
 
 
 def _mesh_formats(text: str) -> tuple[str, ...] | None:
@@ -491,6 +526,10 @@ def cmd_bench(args: argparse.Namespace) -> int:
 
     module = importlib.import_module(f"recon.bench.{args.name}")
     extra = {}
+    if args.suite == "tree" and args.name != "reconstruct":
+        print(f"coronary3d: error: bench {args.name} has no --suite tree (reconstruct has)",
+              file=sys.stderr)
+        return EXIT_USER_ERROR
     if args.name in ("centerline", "reconstruct"):
         extra["suite"] = args.suite
     elif args.suite != "regular":

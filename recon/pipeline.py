@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from recon import __version__
+from recon.bifurcation import Junction
 from recon.calibration import CalibrationResult, calibrate, refine_with_matches
 from recon.centerline import VesselnessMap, compute_vesselness, trace_segment
 from recon.consistency import ConsistencyResult, check_consistency
@@ -222,6 +223,10 @@ def reconstruct_pair(
     options: ReconstructionOptions | None = None,
     progress: Progress | None = None,
     vesselness: tuple[VesselnessMap, VesselnessMap] | None = None,
+    *,
+    traced: tuple[Centerline2D, Centerline2D] | None = None,
+    calibration: CalibrationResult | None = None,
+    junction: Junction | None = None,
 ) -> Reconstruction:
     """Run every stage on one segment of a pair of angiograms.
 
@@ -232,6 +237,11 @@ def reconstruct_pair(
     progress : called as ``progress(stage, fraction)`` before each stage.
     vesselness : the two images' vesselness maps when the caller already has
         them (the viewer computes them once per image for snapping).
+    traced, calibration : the segment's two traces and view B's calibration
+        when the caller made them (the tree, :mod:`recon.tree`, traces every
+        branch and calibrates once for all); those stages are then skipped.
+    junction : a branch's parent; the 3D centerline's start is joined to it
+        (:meth:`recon.bifurcation.Junction.join`).
     """
     options = options or ReconstructionOptions()
     seg = _segment(seeds, options.segment)
@@ -254,15 +264,18 @@ def reconstruct_pair(
             compute_vesselness(angio_a.image, pixel_mm=pixel_mm_a),
             compute_vesselness(angio_b.image, pixel_mm=pixel_mm_b),
         )
-    cl_a = _trace(angio_a, seg.a, vesselness[0], "A", pixel_mm_a, options.intensity_a)
-    cl_b = _trace(angio_b, seg.b, vesselness[1], "B", pixel_mm_b, options.intensity_b)
+    if traced is None:
+        traced = (_trace(angio_a, seg.a, vesselness[0], "A", pixel_mm_a, options.intensity_a),
+                  _trace(angio_b, seg.b, vesselness[1], "B", pixel_mm_b, options.intensity_b))
+    cl_a, cl_b = traced
     lap("trace")
 
     # 2. Calibrate view B on the corresponding features (eq. 5, PALM).
     _notify(progress, "calibrating the geometry", 0.35)
     feat_a, feat_b = _features(seeds, options.segment, cl_a, cl_b)
-    cal = calibrate(view_a, view_b_header, feat_a, feat_b, method=options.optimizer)
-    steps = [_step("features", cal)]
+    cal = calibration or calibrate(view_a, view_b_header, feat_a, feat_b,
+                                   method=options.optimizer)
+    steps = [_step("features" if calibration is None else "tree", cal)]
     lap("calibrate")
 
     # 3. Point correspondence: epipolar COST, CBOCD, adaptive-step DP (eqs. 6-10).
@@ -283,6 +296,8 @@ def reconstruct_pair(
     # 5. Triangulation and the smooth 3D centerline (eqs. 2-3, eq. 11 radii).
     _notify(progress, "triangulating the 3D centerline", 0.7)
     cl3d = build_centerline_3d(matching, view_a, cal.view_b, spacing_mm=options.spacing_mm)
+    if junction is not None:
+        cl3d = junction.join(cl3d)
     metrics = table3_metrics(cl3d, matching, view_a, cal.view_b)
     lap("triangulate")
 

@@ -1,15 +1,22 @@
 """The clinician's marks (seeds.json): the dataclasses and their validation.
 
-Format (version 1), pixel coordinates (col, row) 0-based as in the C-arm
-convention::
+Format (version 2; docs/seeds-format.md), pixel coordinates (col, row)
+0-based as in the C-arm convention::
 
-    {"version": 1,
-     "segments": [{"name": "LAD mid", "a": [[c, r], ...], "b": [[c, r], ...]}],
-     "features": [{"name": "D1 bifurcation", "a": [c, r], "b": [c, r]}]}
+    {"version": 2,
+     "segments": [{"name": "LAD", "a": [[c, r], ...], "b": [[c, r], ...]},
+                  {"name": "D1", "parent": "LAD", "bifurcation": "LAD/D1",
+                   "a": [[c, r], ...], "b": [[c, r], ...]}],
+     "features": [{"name": "LAD/D1", "a": [c, r], "b": [c, r]}]}
 
 In each segment the first point is proximal, the last distal, the points
-between are waypoints; only the ends correspond between views. Reading and
-writing the file is :mod:`recon.io.seeds_file`.
+between are waypoints; only the ends correspond between views. A branch
+names its ``parent`` (an earlier segment) and its ``bifurcation`` (a
+feature: the point where it leaves the parent, clicked in both views).
+Version 1 is the same document without ``parent`` and ``bifurcation``; it
+is read as a tree of unconnected segments, and a tree-free ``Seeds`` is
+written as version 1. Reading and writing the file is
+:mod:`recon.io.seeds_file`.
 """
 
 from __future__ import annotations
@@ -28,7 +35,11 @@ __all__ = [
     "Seeds",
     "SeedsError",
     "seeds_from_dict",
+    "SEEDS_VERSION",
 ]
+
+#: The version this program writes for a tree (and the newest it reads).
+SEEDS_VERSION = 2
 
 
 class SeedsError(CoronaryError):
@@ -37,11 +48,24 @@ class SeedsError(CoronaryError):
 
 @dataclass(frozen=True)
 class Segment:
-    """One vessel segment: clicks (K, 2) in view A and (L, 2) in view B, proximal first."""
+    """One vessel segment: clicks (K, 2) in view A and (L, 2) in view B, proximal first.
+
+    ``parent`` is the name of the segment a branch leaves and
+    ``bifurcation`` the name of the feature where it leaves it (both None
+    for a root segment).
+    """
 
     name: str
     a_px: tuple[tuple[float, float], ...]
     b_px: tuple[tuple[float, float], ...]
+    # repr=False: a root segment's repr is what it was before the tree (the
+    # phantom's regression hashes include the seeds' repr)
+    parent: str | None = field(default=None, repr=False)
+    bifurcation: str | None = field(default=None, repr=False)
+
+    @property
+    def is_branch(self) -> bool:
+        return self.parent is not None
 
     @property
     def a(self) -> NDArray[np.float64]:
@@ -66,13 +90,39 @@ class Seeds:
     segments: tuple[Segment, ...] = field(default_factory=tuple)
     features: tuple[Feature, ...] = field(default_factory=tuple)
 
+    @property
+    def is_tree(self) -> bool:
+        """True when some segment is a branch of another."""
+        return any(s.is_branch for s in self.segments)
+
+    def segment_index(self, name: str) -> int:
+        """Index of the segment called ``name``; SeedsError when there is none."""
+        for k, s in enumerate(self.segments):
+            if s.name == name:
+                return k
+        raise SeedsError(f"seeds: no segment named {_shown(name)}")
+
+    def feature(self, name: str) -> Feature:
+        """The feature called ``name``; SeedsError when there is none."""
+        for f in self.features:
+            if f.name == name:
+                return f
+        raise SeedsError(f"seeds: no feature named {_shown(name)}")
+
     def to_dict(self) -> dict:
+        """The JSON document: version 2 when some segment is a branch, else version 1."""
+        segments = []
+        for s in self.segments:
+            entry: dict = {"name": s.name}
+            if s.is_branch:
+                entry["parent"] = s.parent
+                entry["bifurcation"] = s.bifurcation
+            entry["a"] = [list(p) for p in s.a_px]
+            entry["b"] = [list(p) for p in s.b_px]
+            segments.append(entry)
         return {
-            "version": 1,
-            "segments": [
-                {"name": s.name, "a": [list(p) for p in s.a_px], "b": [list(p) for p in s.b_px]}
-                for s in self.segments
-            ],
+            "version": SEEDS_VERSION if self.is_tree else 1,
+            "segments": segments,
             "features": [
                 {"name": f.name, "a": list(f.a_px), "b": list(f.b_px)} for f in self.features
             ],
@@ -151,9 +201,9 @@ def seeds_from_dict(data: object, source: str = "seeds") -> Seeds:
     if not isinstance(data, dict):
         raise SeedsError(f"{source}: the top level must be a JSON object")
     version = data.get("version", 1)
-    if version != 1:
+    if isinstance(version, bool) or version not in (1, SEEDS_VERSION):
         raise SeedsError(
-            f"{source}: unsupported version {_shown(version)} (this program reads 1)"
+            f"{source}: unsupported version {_shown(version)} (this program reads 1 and 2)"
         )
     segments = []
     for k, s in enumerate(_entries(data, "segments", source, MAX_SEGMENTS)):
@@ -174,7 +224,16 @@ def seeds_from_dict(data: object, source: str = "seeds") -> Seeds:
                     f"{MAX_POINTS_PER_VIEW} per view are read"
                 )
             views[key] = tuple(_point(p, f"{where}.{key}[{i}]") for i, p in enumerate(pts))
-        segments.append(Segment(name=name, a_px=views["a"], b_px=views["b"]))
+        link = {}
+        for key in ("parent", "bifurcation"):
+            value = s.get(key)
+            if value is not None and (version == 1 or not isinstance(value, str)):
+                raise SeedsError(
+                    f"{where} ({name}): '{key}' needs version 2 and a name (text), "
+                    f"got {_shown(value)}"
+                )
+            link[key] = None if value is None else _name(value, "")
+        segments.append(Segment(name=name, a_px=views["a"], b_px=views["b"], **link))
     features = []
     for k, f in enumerate(_entries(data, "features", source, MAX_FEATURES)):
         where = f"{source}: features[{k}]"
@@ -187,5 +246,32 @@ def seeds_from_dict(data: object, source: str = "seeds") -> Seeds:
                 b_px=_point(f["b"], f"{where}.b"),
             )
         )
+    _check_tree(segments, features, source)
     return Seeds(segments=tuple(segments), features=tuple(features))
+
+
+def _check_tree(segments: list[Segment], features: list[Feature], source: str) -> None:
+    """In a tree (some segment is a branch): segment names unique, each branch's parent an
+    earlier segment and its bifurcation a feature. A tree-free list is not checked
+    (version-1 files may repeat a name)."""
+    if not any(s.is_branch for s in segments):
+        return
+    seen: set[str] = set()
+    feature_names = {f.name for f in features}
+    for k, s in enumerate(segments):
+        where = f"{source}: segments[{k}] ({s.name})"
+        if s.name in seen:
+            raise SeedsError(f"{where}: another segment has the same name; names must differ")
+        if (s.parent is None) != (s.bifurcation is None):
+            raise SeedsError(f"{where}: a branch needs both 'parent' and 'bifurcation'")
+        if s.parent is not None:
+            if s.parent not in seen:
+                raise SeedsError(
+                    f"{where}: parent {_shown(s.parent)} is not the name of an earlier segment"
+                )
+            if s.bifurcation not in feature_names:
+                raise SeedsError(
+                    f"{where}: bifurcation {_shown(s.bifurcation)} is not the name of a feature"
+                )
+        seen.add(s.name)
 

@@ -240,7 +240,7 @@ def make_cases(folder: Path, n_random: int = 0, seed: int = 0) -> list[FuzzCase]
         ("three coordinates", b'{"features": [{"a": [1, 1, 1], "b": [1, 1]}]}'),
         ("1e300 coordinate", b'{"features": [{"a": [1e300, 1], "b": [1, 1]}]}'),
         ("a top-level list", b"[1, 2, 3]"),
-        ("version 2", b'{"version": 2}'),
+        ("version 3", b'{"version": 3}'),
         ("empty file", b""),
         ("truncated JSON", b'{"segments": [{"a": [[1, 2'),
         ("control characters in a name", b'{"segments": [{"name": "L\\u001b[2J\\nAD", '

@@ -16,6 +16,9 @@ centerline RMS after a rigid (rotation + translation, not scaled)
 alignment to the truth (median and max), and the failed cases with their
 one-line reason.
 
+``suite="tree"``: phantom trees with bifurcation lesions, every branch in
+one reconstruction (:mod:`recon.bench.tree`).
+
 ``jitter=N`` adds click stability: per case, N more runs with every click
 moved uniformly within a disc of :data:`JITTER_PX`; the spread (max - min
 over the N runs) of the MLD, the %DS and the MLD site (mm along the 3D
@@ -193,6 +196,10 @@ def run(cases: int | None = None, seed: int = 0, suite: str = "regular",
     local Dask cluster of that many processes (the engine of `coronary3d
     batch`); None runs them one after another in this process.
     """
+    if suite == "tree":  # phantom trees with bifurcation lesions (recon.bench.tree)
+        from recon.bench.tree import run_tree
+
+        return run_tree(cases, seed)
     check_suite(suite)
     if jitter < 0:
         raise ValueError(f"jitter must be >= 0, got {jitter}")
@@ -273,6 +280,10 @@ def format_table(result: dict) -> str:
     """Plain-text table of a :func:`run` result."""
     if result.get("suite") == "varied":
         return _format_varied(result)
+    if result.get("suite") == "tree":
+        from recon.bench.tree import format_tree
+
+        return format_tree(result)
     lines = [
         f"End-to-end reconstruction on {result['cases']} phantom cases "
         f"(self-calibration {'on' if result['self_calibration'] else 'off'})",

@@ -22,6 +22,7 @@ from recon.io.files import atomic_write_bytes
 if TYPE_CHECKING:
     from recon.io.sr import SRSources
     from recon.pipeline import Reconstruction
+    from recon.tree import TreeReconstruction
 
 __all__ = [
     "MESH_FORMATS",
@@ -45,6 +46,7 @@ CENTERLINE_COLUMNS = (
     "area_mm2",
     "radius_a_mm",
     "radius_b_mm",
+    "branch",
 )
 
 
@@ -69,38 +71,52 @@ def export_mesh(mesh: trimesh.Trimesh, fmt: str) -> bytes:
     return bytes(data)
 
 
-def centerline_csv(rec: Reconstruction) -> bytes:
-    """centerline.csv: header line then one row per point, proximal to distal."""
-    cl = rec.centerline_3d
-    area = rec.surface.sections.area_mm2
-    table = np.column_stack(
-        [
-            cl.s_mm,
-            cl.X_world,
-            np.sqrt(area / np.pi),
-            rec.profile.diameter_mm,
-            area,
-            cl.radius_a_mm,
-            cl.radius_b_mm,
-        ]
-    )
+def _segments(rec: Reconstruction | TreeReconstruction) -> list[tuple[int, Reconstruction]]:
+    """(segment index in the seeds, its reconstruction) of every segment reconstructed."""
+    branches = getattr(rec, "branches", None)
+    if branches is None:
+        return [(rec.options.segment, rec)]
+    return [(b.options.segment, b) for b in branches]
+
+
+def _mesh(rec: Reconstruction | TreeReconstruction) -> trimesh.Trimesh:
+    """The mesh written: a tree's union of branches, else the segment's surface."""
+    tree_surface = getattr(rec, "tree_surface", None)
+    return rec.surface.mesh if tree_surface is None else tree_surface.mesh
+
+
+def centerline_csv(rec: Reconstruction | TreeReconstruction) -> bytes:
+    """centerline.csv: header line then one row per point, each segment proximal to
+    distal, segments in the seeds' order; ``branch`` is the segment's 0-based index
+    in seeds.json."""
     buf = io.StringIO()
     buf.write(",".join(CENTERLINE_COLUMNS) + "\n")
-    np.savetxt(buf, table, delimiter=",", fmt="%.4f")
+    for branch_id, seg in _segments(rec):
+        cl = seg.centerline_3d
+        area = seg.surface.sections.area_mm2
+        table = np.column_stack([cl.s_mm, cl.X_world, np.sqrt(area / np.pi),
+                                 2.0 * np.sqrt(area / np.pi), area, cl.radius_a_mm,
+                                 cl.radius_b_mm, np.full(len(cl.s_mm), branch_id)])
+        np.savetxt(buf, table, delimiter=",", fmt=["%.4f"] * 9 + ["%d"])
     return buf.getvalue().encode()
 
 
-def centerline_vtp(rec: Reconstruction) -> bytes:
-    """centerline.vtp: the points of centerline.csv with its radius_mm as ``Radius``."""
+def centerline_vtp(rec: Reconstruction | TreeReconstruction) -> bytes:
+    """centerline.vtp: the points of centerline.csv with its radius_mm as ``Radius``,
+    one polyline per segment and its ``branch`` as ``BranchId``."""
     from recon.io.vtp import centerline_polydata_bytes
 
-    cl = rec.centerline_3d
-    radius_mm = np.sqrt(rec.surface.sections.area_mm2 / np.pi)
-    return centerline_polydata_bytes(cl.X_world, radius_mm, cl.s_mm)
+    parts = _segments(rec)
+    X = np.vstack([seg.centerline_3d.X_world for _, seg in parts])
+    radius_mm = np.concatenate([np.sqrt(seg.surface.sections.area_mm2 / np.pi)
+                                for _, seg in parts])
+    s_mm = np.concatenate([seg.centerline_3d.s_mm for _, seg in parts])
+    branch_id = np.concatenate([np.full(len(seg.centerline_3d.s_mm), k) for k, seg in parts])
+    return centerline_polydata_bytes(X, radius_mm, s_mm, branch_id)
 
 
 def outputs_as_bytes(
-    rec: Reconstruction,
+    rec: Reconstruction | TreeReconstruction,
     formats: tuple[str, ...] = ("stl",),
     sr_sources: SRSources | None = None,
 ) -> dict[str, bytes]:
@@ -111,7 +127,7 @@ def outputs_as_bytes(
     """
     files = {"centerline.csv": centerline_csv(rec), "centerline.vtp": centerline_vtp(rec)}
     for fmt in formats:
-        files[f"mesh.{fmt}"] = export_mesh(rec.surface.mesh, fmt)
+        files[f"mesh.{fmt}"] = export_mesh(_mesh(rec), fmt)
     report = json.dumps(rec.report(), indent=2, default=_json_default)
     files["report.json"] = (report + "\n").encode()
     if sr_sources is not None:
@@ -124,7 +140,7 @@ def outputs_as_bytes(
 
 
 def write_outputs(
-    rec: Reconstruction,
+    rec: Reconstruction | TreeReconstruction,
     out_dir: Path,
     formats: tuple[str, ...] = ("stl",),
     sr_sources: SRSources | None = None,

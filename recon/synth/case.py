@@ -100,6 +100,7 @@ def make_phantom(
     header_error: bool = True,
     chain: str | ImagingChain | None = None,
     anatomy: str | Anatomy | None = None,
+    side_stenosis_pct: float = 0.0,
 ) -> PhantomCase:
     """Make one synthetic two-view case with its ground truth.
 
@@ -118,6 +119,8 @@ def make_phantom(
         None: the plain renderer.
     anatomy : an anatomy variant (name in :data:`recon.synth.anatomy.ANATOMIES`);
         None: the plain tree.
+    side_stenosis_pct : an ostial lesion of the first side branch (diameter
+        percentage; :func:`recon.synth.tree.truth_from_tree`); 0: none.
 
     Returns
     -------
@@ -167,7 +170,7 @@ def make_phantom(
     if tree.eccentric is not None:
         info["eccentric"] = tree.eccentric
 
-    truth, branch_names = truth_from_tree(tree, stenosis_pct, rotvec, t_mm)
+    truth, branch_names = truth_from_tree(tree, stenosis_pct, rotvec, t_mm, side_stenosis_pct)
     seeds = make_seeds(
         np.random.default_rng(ss_click),
         truth.segment_X_world,

@@ -26,7 +26,10 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from recon.bifurcation import carina_s_mm
+from recon.bifurcation import nearest_on_polyline as nearest_on_polyline_3d
 from recon.geometry import ViewGeometry, rotation_from_rotvec
+from recon.seeds import Seeds, Segment
 from recon.types import arclength
 
 __all__ = [
@@ -37,6 +40,10 @@ __all__ = [
     "truth_from_tree",
     "SAMPLE_STEP_MM",
     "TREE_EXTENT_MM",
+    "TREE_LESIONS",
+    "TreeCase",
+    "tree_seeds",
+    "make_tree_case",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -63,6 +70,8 @@ LOOP_LIFT_MM = 5.5  # second pass over the surface: > twice the largest main rad
 LOOP_CLEARANCE_MM = 0.5  # least lumen-to-lumen gap between the loop's two passes
 BRANCH_ON_SHOULDER = (0.3, 0.6)  # branch origin from the lesion centre, x lesion length
 ECCENTRICITY = (0.7, 1.0)  # lumen-centre offset / (reference - lumen radius)
+OSTIUM_START_MM = 0.5  # an ostial branch lesion starts this far beyond the main wall
+OSTIUM_LENGTH_MM = 6.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -490,13 +499,32 @@ def _main_reference_radius(tree: TreeDraw, s_mm: float) -> float:
 
 
 
+def _ostium_bump(tree: TreeDraw, s_b: FloatArray, k: int, main_X: FloatArray,
+                 main_r: FloatArray) -> FloatArray:
+    """(N,) raised-cosine profile (peak 1) of an ostial lesion on branch k at arc lengths s_b.
+
+    It starts :data:`OSTIUM_START_MM` beyond the branch's carina (where its
+    centerline leaves the main lumen: main_X (M, 3), main_r (M,)), so it
+    lies outside the main lumen, and is :data:`OSTIUM_LENGTH_MM` long.
+    """
+    s_c = carina_s_mm(tree.branches_X[k], main_X, main_r)
+    centre = s_c + OSTIUM_START_MM + OSTIUM_LENGTH_MM / 2
+    x = (s_b - centre) / OSTIUM_LENGTH_MM
+    return np.where(np.abs(x) < 0.5, 0.5 * (1.0 + np.cos(2 * np.pi * x)), 0.0)
+
+
 def truth_from_tree(
-    tree: TreeDraw, stenosis_pct: float, rotvec: FloatArray, t_mm: FloatArray
+    tree: TreeDraw, stenosis_pct: float, rotvec: FloatArray, t_mm: FloatArray,
+    side_stenosis_pct: float = 0.0,
 ) -> tuple[PhantomTruth, list[str]]:
     """The ground truth of a tree with a ``stenosis_pct`` stenosis, and the bifurcations' names.
 
     ``rotvec`` and ``t_mm`` are view B's header error (stored in the truth).
+    ``side_stenosis_pct`` narrows the ostium of the branch nearest the main
+    lesion by that diameter percentage (:func:`_ostium_bump`); 0 leaves the
+    branches healthy.
     """
+    k_ostium = int(np.argmin(np.abs(np.asarray(tree.branch_s) - tree.sten_s_main)))
     s_main = np.arange(len(tree.main_X)) * SAMPLE_STEP_MM
     r_main = _main_radius(tree, s_main, stenosis_pct)
     main_X = tree.main_X
@@ -507,7 +535,11 @@ def truth_from_tree(
     branch_names = []
     for k, (Xb, (rb0, rb1)) in enumerate(zip(tree.branches_X, tree.r_branch, strict=True)):
         sb = np.arange(len(Xb)) * SAMPLE_STEP_MM
-        vessels.append((Xb, rb0 + (rb1 - rb0) * sb / sb[-1]))
+        rb = rb0 + (rb1 - rb0) * sb / sb[-1]
+        if k == k_ostium and side_stenosis_pct > 0:
+            bump = _ostium_bump(tree, sb, k, main_X, r_main)
+            rb = rb * (1.0 - side_stenosis_pct / 100.0 * bump)
+        vessels.append((Xb, rb))
         names.append(f"branch {k + 1}")
         branch_names.append(f"bifurcation {k + 1}")
     for Xe, re_, name in tree.extra:
@@ -547,3 +579,92 @@ def truth_from_tree(
     )
     return truth, branch_names
 
+
+
+# ------------------------------------------------------------ tree seeds
+#: Bifurcation lesions of the tree suite: the main lesion on a bifurcation's
+#: shoulder (the carina / distal or proximal main), an ostial side-branch
+#: lesion, or both at one bifurcation.
+TREE_LESIONS = ("shoulder", "ostium", "both")
+BRANCH_CLICK_FRACTIONS = (0.4, 0.75)  # waypoint and distal click, fraction of the branch
+BRANCH_MIN_INSIDE_MM = 8.0  # a branch is clicked when it leaves the segment this far inside
+
+
+@dataclass(frozen=True, eq=False)
+class TreeCase:
+    """A phantom case with every usable branch clicked as a segment of the seeds.
+
+    ``seeds`` : version-2 seeds: segment 0 the main segment, then one branch
+    per usable side branch (parent "main", bifurcation "bifurcation k").
+    ``vessels`` : for each segment, the index of its vessel in
+    ``case.truth.vessels``. ``end_s_mm`` : for each segment, the arc length
+    on that vessel of its distal click's true point (a branch starts at 0).
+    """
+
+    case: object  # recon.synth.case.PhantomCase
+    seeds: Seeds
+    lesion: str
+    vessels: tuple[int, ...]
+    end_s_mm: tuple[float, ...]
+
+
+def tree_seeds(rng: np.random.Generator, case) -> tuple[Seeds, tuple[int, ...], tuple[float, ...]]:
+    """The case's seeds with each side branch that leaves the main segment at least
+    :data:`BRANCH_MIN_INSIDE_MM` inside it added as a branch segment.
+
+    A branch's first click in each view is its bifurcation's click (the
+    clinician adds the branch from the bifurcation), then a waypoint and the
+    distal click at :data:`BRANCH_CLICK_FRACTIONS` of the branch, true
+    projections through :func:`recon.synth.clicks.click_px`.
+    """
+    from recon.synth.clicks import click_px
+
+    truth = case.truth
+    main = case.seeds.segments[0]
+    s0 = truth.segment_start_s_mm
+    s1 = s0 + truth.segment_length_mm
+    main_X = truth.vessels[0][0]
+    segments = [main]
+    vessels = [0]
+    end_s = [s1]
+    features = {f.name: f for f in case.seeds.features}
+    for k, name in enumerate(truth.vessel_names[1:], start=1):
+        if not name.startswith("branch "):
+            continue
+        Xb = truth.vessels[k][0]
+        feature = features.get(f"bifurcation {name.split()[1]}")
+        _, s_origin, _ = nearest_on_polyline_3d(main_X, Xb[0])
+        margin = BRANCH_MIN_INSIDE_MM
+        if feature is None or not s0 + margin <= s_origin <= s1 - margin:
+            continue
+        idx = [int(round(f * (len(Xb) - 1))) for f in BRANCH_CLICK_FRACTIONS]
+        clicks = {}
+        for key, view, first in (("a", case.view_a, feature.a_px),
+                                 ("b", case.view_b_true, feature.b_px)):
+            pts = click_px(rng, view.project(Xb[idx]))
+            clicks[key] = (tuple(first), *[(round(float(c), 1), round(float(r), 1))
+                                           for c, r in pts])
+        segments.append(Segment(name=name, a_px=clicks["a"], b_px=clicks["b"], parent=main.name,
+                                bifurcation=feature.name))
+        vessels.append(k)
+        end_s.append(idx[-1] * SAMPLE_STEP_MM)
+    return (Seeds(segments=tuple(segments), features=case.seeds.features), tuple(vessels),
+            tuple(end_s))
+
+
+def make_tree_case(preset: str, seed: int, lesion: str, stenosis_pct: float = 50.0,
+                   render: bool = True) -> TreeCase:
+    """A tree-suite case: :func:`recon.synth.case.make_phantom` with a bifurcation
+    lesion (:data:`TREE_LESIONS`) and its branches clicked (:func:`tree_seeds`)."""
+    from recon.synth.case import make_phantom
+
+    if lesion not in TREE_LESIONS:
+        raise ValueError(f"unknown lesion {lesion!r} (use one of {', '.join(TREE_LESIONS)})")
+    case = make_phantom(
+        preset, seed, stenosis_pct=stenosis_pct, render=render,
+        anatomy="branch-stenosis" if lesion in ("shoulder", "both") else None,
+        side_stenosis_pct=stenosis_pct if lesion in ("ostium", "both") else 0.0,
+    )
+    rng = np.random.default_rng(np.random.SeedSequence([int(seed), 15]))
+    seeds, vessels, end_s = tree_seeds(rng, case)
+    return TreeCase(case=case, seeds=seeds, lesion=lesion, vessels=vessels, end_s_mm=end_s)

@@ -199,3 +199,52 @@ def test_tapering_stenosed_tube_is_closed():
     res = build_surface(centerline_3d(X, r, 0.9 * r), VIEW_A, VIEW_B)
     assert_clean_closed_mesh(res.mesh)
 
+
+
+# ------------------------------------------------------------------ the tree
+def test_tree_surface_is_the_union_of_a_y_with_no_internal_faces():
+    from recon.surface import build_tree_surface
+
+    main = centerline_3d(straight(length=40.0, direction=(1, 0, 0), origin=(0, 0, 0)), 1.5)
+    t = np.deg2rad(50.0)
+    side_X = np.arange(0.0, 20.0 + 1e-9, 0.25)[:, None] * np.array([np.cos(t), np.sin(t), 0.0])
+    side = centerline_3d(side_X, 1.0)  # starts on the main vessel's axis
+    sections = [elliptic_cross_sections(c, VIEW_A, VIEW_B) for c in (main, side)]
+    res = build_tree_surface(sections, voxel_mm=0.2)
+    assert res.components == 1
+    assert_clean_closed_mesh(res.mesh)
+    v_main = np.pi * 1.5**2 * 40.0 + 4.0 / 3.0 * np.pi * 1.5**3
+    v_side = np.pi * 1.0**2 * 20.0 + 4.0 / 3.0 * np.pi * 1.0**3
+    # the union: more than the main vessel alone, less than the two counted apart
+    assert v_main + 0.8 * v_side < res.mesh.volume < v_main + v_side
+    # no face inside either vessel: every vertex is on the wall of one and not deep in the other
+    d_main, _ = dist_to_polyline(res.mesh.vertices, main.X_world)
+    d_side, _ = dist_to_polyline(res.mesh.vertices, side.X_world)
+    on_main = np.abs(d_main - 1.5) < 0.2
+    on_side = np.abs(d_side - 1.0) < 0.2
+    assert np.all(on_main | on_side)
+    assert not np.any(d_main < 1.5 - 0.3)  # nothing deep inside the main lumen
+    assert not np.any(d_side[d_main > 1.5] < 1.0 - 0.3)
+
+
+def test_tree_surface_of_two_apart_vessels_has_two_components():
+    from recon.surface import build_tree_surface
+
+    a = centerline_3d(straight(length=20.0, direction=(1, 0, 0), origin=(0, 0, 0)), 1.0)
+    b = centerline_3d(straight(length=20.0, direction=(1, 0, 0), origin=(0, 8, 0)), 1.0)
+    sections = [elliptic_cross_sections(c, VIEW_A, VIEW_B) for c in (a, b)]
+    assert build_tree_surface(sections, voxel_mm=0.25).components == 2
+
+
+def test_pieces_tells_a_second_vessel_from_a_cavity_inside_the_first():
+    import trimesh
+
+    from recon.surface import _pieces
+
+    outer = trimesh.creation.icosphere(radius=3.0)
+    pocket = trimesh.creation.icosphere(radius=0.5)
+    pocket.invert()  # wound like an outside pocket within the inside
+    apart = trimesh.creation.icosphere(radius=1.0)
+    apart.apply_translation([10.0, 0.0, 0.0])
+    assert _pieces(trimesh.util.concatenate([outer, pocket])) == (1, 1)
+    assert _pieces(trimesh.util.concatenate([outer, apart])) == (2, 0)

@@ -36,7 +36,7 @@ def test_version_is_optional_and_round_trip(tmp_path):
     [
         ("{not json", "not valid JSON"),
         ([1, 2], "top level"),
-        ({"version": 2}, "unsupported version"),
+        ({"version": 3}, "unsupported version"),
         ({"segments": [{"a": [[1, 2]], "b": [[1, 2], [3, 4]]}]}, "at least two points"),
         ({"segments": [{"a": [[1, "x"], [3, 4]], "b": [[1, 2], [3, 4]]}]}, "segments[0].a[0]"),
         ({"features": [{"a": [1, 2]}]}, "features[0]"),

@@ -45,3 +45,17 @@ def test_the_writer_refuses_arrays_that_disagree():
         centerline_polydata_bytes(X, np.ones(4), np.arange(5.0))
     with pytest.raises(ValueError, match="N >= 2"):
         centerline_polydata_bytes(X[:1], np.ones(1), np.zeros(1))
+
+
+def test_branches_become_one_polyline_each_with_their_branch_id(tmp_path):
+    X = np.column_stack([np.arange(7.0), np.zeros(7), np.zeros(7)])
+    ids = np.array([0, 0, 0, 0, 2, 2, 2])
+    path = tmp_path / "tree.vtp"
+    path.write_bytes(centerline_polydata_bytes(X, np.ones(7), np.arange(7.0), ids))
+    poly = _read(path)
+    assert poly.GetNumberOfLines() == 2
+    assert [poly.GetCell(k).GetNumberOfPoints() for k in range(2)] == [4, 3]
+    assert poly.GetCell(1).GetPointId(0) == 4
+    np.testing.assert_array_equal(vtk_to_numpy(poly.GetPointData().GetArray("BranchId")), ids)
+    with pytest.raises(ValueError, match="at least two points"):
+        centerline_polydata_bytes(X, np.ones(7), np.arange(7.0), [0, 0, 0, 1, 2, 2, 2])

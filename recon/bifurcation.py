@@ -1,0 +1,298 @@
+"""Where a branch leaves its parent: the 3D join and bifurcation QCA.
+
+A branch's 3D centerline starts at its bifurcation click, triangulated on
+its own; :class:`Junction` moves that start onto the parent's 3D
+centerline (the nearest point J) and blends the shift out along the part
+of the branch that still lies inside the parent's lumen, so the branches
+meet without a gap and the branch's direction beyond the carina is its own.
+
+Bifurcation QCA (definitions, as in 3D bifurcation QCA; Girasis et al.,
+EuroIntervention, for the phantom validation of such a tool):
+
+- J is the junction point on the parent, ``r_J`` the parent's lumen radius
+  there. The carina is taken where the branch's centerline leaves the
+  parent's lumen: the first branch point farther than the parent's local
+  radius from the parent's centerline (arc length ``carina_s_mm`` along
+  the branch).
+- Three segments: proximal main (parent, arc length from J - r_J back
+  :data:`QCA_SEGMENT_MM`), distal main (parent, J + r_J onwards) and side
+  branch (branch, carina onwards), each :data:`QCA_SEGMENT_MM` long or up
+  to the vessel's end.
+- Each segment's reference diameter is the mean of its vessel's
+  interpolated reference (:mod:`recon.measure`) over the segment, its MLD
+  the least smoothed diameter in it, its %DS = 100 (1 - MLD / reference at
+  the MLD).
+- Directions: the principal axis of the centerline points over
+  :data:`DIRECTION_WINDOW_MM` (0 to 4 mm) beyond the segment's start (the
+  carina side), pointing away from the bifurcation. The bifurcation
+  (distal) angle is between the distal main and the side branch
+  directions, the proximal angle between the proximal main (pointing
+  proximally) and the side branch.
+- Medina class: (proximal main, distal main, side branch), 1 where that
+  segment's %DS >= 50, else 0.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from recon.types import Centerline3D, arclength
+
+FloatArray = NDArray[np.float64]
+
+__all__ = [
+    "Junction",
+    "BifurcationQCA",
+    "SegmentQCA",
+    "nearest_on_polyline",
+    "carina_s_mm",
+    "direction_away",
+    "bifurcation_angles_deg",
+    "bifurcation_qca",
+    "QCA_SEGMENT_MM",
+    "DIRECTION_WINDOW_MM",
+    "MEDINA_DS_PCT",
+]
+
+QCA_SEGMENT_MM = 10.0  # length of each of the three bifurcation segments
+DIRECTION_WINDOW_MM = (0.0, 4.0)  # direction fit window beyond each segment's start
+MEDINA_DS_PCT = 50.0  # a Medina 1: diameter stenosis at least this
+_MIN_BLEND_MM = 1.0
+
+
+def nearest_on_polyline(X_world: FloatArray, point: ArrayLike) -> tuple[FloatArray, float, int]:
+    """The point of the polyline X_world (P, 3) nearest ``point`` (3,).
+
+    Returns (that point (3,), its arc length along the polyline (mm), the
+    index of the polyline vertex before it).
+    """
+    X = np.asarray(X_world, dtype=float)
+    p = np.asarray(point, dtype=float)
+    seg = np.diff(X, axis=0)
+    len2 = np.maximum(np.einsum("ij,ij->i", seg, seg), 1e-18)
+    tau = np.clip(np.einsum("ij,ij->i", p - X[:-1], seg) / len2, 0.0, 1.0)
+    foot = X[:-1] + tau[:, None] * seg
+    k = int(np.argmin(np.sum((foot - p) ** 2, axis=1)))
+    s = arclength(X)
+    return foot[k], float(s[k] + tau[k] * np.sqrt(len2[k])), k
+
+
+def _distance_to_polyline(points: FloatArray, X_world: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Distance (N,) of points (N, 3) to the polyline (P, 3), and the feet's arc length (N,)."""
+    s = arclength(X_world)
+    seg = np.diff(X_world, axis=0)  # (P-1, 3)
+    len2 = np.maximum(np.einsum("ij,ij->i", seg, seg), 1e-18)
+    rel = points[:, None, :] - X_world[None, :-1, :]  # (N, P-1, 3)
+    tau = np.clip(np.einsum("npk,pk->np", rel, seg) / len2, 0.0, 1.0)
+    d2 = np.sum((rel - tau[..., None] * seg[None]) ** 2, axis=2)
+    k = np.argmin(d2, axis=1)
+    n = np.arange(len(points))
+    return np.sqrt(d2[n, k]), s[k] + tau[n, k] * np.sqrt(len2[k])
+
+
+def carina_s_mm(branch_X: FloatArray, parent_X: FloatArray, parent_radius_mm: FloatArray) -> float:
+    """Arc length (mm) along the branch where its centerline leaves the parent's lumen.
+
+    branch_X (N, 3) from the bifurcation; parent_X (P, 3) with radii (P,).
+    Sought over the branch's first 4 r_max + 2 mm (r_max the parent's
+    largest radius); the end of that stretch when the branch has not left
+    by then (a branch running inside its parent).
+    """
+    s_b = arclength(branch_X)
+    window = s_b <= min(s_b[-1], 4.0 * float(np.max(parent_radius_mm)) + 2.0)
+    d, s_foot = _distance_to_polyline(branch_X[window], parent_X)
+    r_local = np.interp(s_foot, arclength(parent_X), parent_radius_mm)
+    outside = np.flatnonzero(d > r_local)
+    return float(s_b[window][outside[0]] if outside.size else s_b[window][-1])
+
+
+@dataclass(frozen=True, eq=False)
+class Junction:
+    """A branch's parent: its 3D centerline (P, 3) mm and lumen radius (P,) mm."""
+
+    parent_X_world: FloatArray
+    parent_radius_mm: FloatArray
+
+    def join(self, cl3d: Centerline3D) -> Centerline3D:
+        """The branch centerline with its start moved onto the parent's centerline.
+
+        The shift J - X_0 is blended out with a raised cosine over the
+        branch's first max(carina arc length, 1 mm): the stretch inside the
+        parent's lumen. Arc length and tangents are recomputed; radii and
+        the raw points stay.
+        """
+        X = np.asarray(cl3d.X_world, dtype=float)
+        J, _, _ = nearest_on_polyline(self.parent_X_world, X[0])
+        s = arclength(X)
+        blend = max(carina_s_mm(X, self.parent_X_world, self.parent_radius_mm), _MIN_BLEND_MM)
+        w = np.where(s < blend, 0.5 * (1.0 + np.cos(np.pi * np.clip(s / blend, 0.0, 1.0))), 0.0)
+        X_new = X + w[:, None] * (J - X[0])[None, :]
+        T = np.gradient(X_new, axis=0)
+        T /= np.maximum(np.linalg.norm(T, axis=1, keepdims=True), 1e-12)
+        return Centerline3D(
+            X_world=X_new,
+            s_mm=arclength(X_new),
+            tangents=T,
+            radius_a_mm=cl3d.radius_a_mm,
+            radius_b_mm=cl3d.radius_b_mm,
+            X_raw_world=cl3d.X_raw_world,
+            points_a_px=cl3d.points_a_px,
+            points_b_px=cl3d.points_b_px,
+            overlap_a=cl3d.overlap_a,
+            overlap_b=cl3d.overlap_b,
+        )
+
+
+def direction_away(X_world: FloatArray, s_mm: FloatArray, s_from: float, s_to: float) -> FloatArray:
+    """Unit principal direction (3,) of the points with s in [s_from, s_to], pointing to s_to.
+
+    ``s_to < s_from`` fits a stretch before ``s_from`` pointing backwards.
+    Falls back to the two nearest points when the window holds fewer than 2.
+    """
+    lo, hi = min(s_from, s_to), max(s_from, s_to)
+    inside = (s_mm >= lo) & (s_mm <= hi)
+    if np.count_nonzero(inside) < 2:
+        idx = np.argsort(np.abs(s_mm - 0.5 * (lo + hi)))[:2]
+        inside = np.zeros(len(s_mm), dtype=bool)
+        inside[idx] = True
+    P = X_world[inside]
+    centred = P - P.mean(axis=0)
+    axis = np.linalg.svd(centred, full_matrices=False)[2][0]
+    toward = np.interp(s_to, s_mm, np.arange(len(s_mm)))
+    i_to = int(np.clip(round(toward), 0, len(s_mm) - 1))
+    i_from = int(np.clip(round(np.interp(s_from, s_mm, np.arange(len(s_mm)))), 0, len(s_mm) - 1))
+    if axis @ (X_world[i_to] - X_world[i_from]) < 0:
+        axis = -axis
+    return axis / np.linalg.norm(axis)
+
+
+def _angle_deg(u: FloatArray, v: FloatArray) -> float:
+    return float(np.degrees(np.arccos(np.clip(u @ v, -1.0, 1.0))))
+
+
+def bifurcation_angles_deg(
+    parent_X: FloatArray, parent_radius_mm: FloatArray, branch_X: FloatArray
+) -> tuple[float, float, dict]:
+    """(bifurcation angle, proximal angle) in degrees, and the geometry they came from.
+
+    parent_X (P, 3) and its radii (P,); branch_X (N, 3) starting at the
+    bifurcation (on or near the parent). The dict holds ``junction_s_mm``,
+    ``junction_radius_mm``, ``carina_s_mm`` and the three unit directions.
+    """
+    s_p = arclength(parent_X)
+    s_b = arclength(branch_X)
+    _, s_j, _ = nearest_on_polyline(parent_X, branch_X[0])
+    r_j = float(np.interp(s_j, s_p, parent_radius_mm))
+    s_c = carina_s_mm(branch_X, parent_X, parent_radius_mm)
+    w0, w1 = DIRECTION_WINDOW_MM
+    side = direction_away(branch_X, s_b, s_c + w0, s_c + w1)
+    distal = direction_away(parent_X, s_p, s_j + r_j + w0, s_j + r_j + w1)
+    proximal = direction_away(parent_X, s_p, s_j - r_j - w0, s_j - r_j - w1)
+    info = {"junction_s_mm": s_j, "junction_radius_mm": r_j, "carina_s_mm": s_c,
+            "direction_proximal": proximal, "direction_distal": distal, "direction_side": side}
+    return _angle_deg(distal, side), _angle_deg(proximal, side), info
+
+
+@dataclass(frozen=True)
+class SegmentQCA:
+    """QCA of one of a bifurcation's three segments (mm, % of diameter)."""
+
+    start_s_mm: float
+    end_s_mm: float
+    reference_diameter_mm: float
+    mld_mm: float
+    diameter_stenosis_pct: float
+
+
+@dataclass(frozen=True)
+class BifurcationQCA:
+    """One bifurcation: its segments, angles and Medina class.
+
+    ``proximal_main``, ``distal_main`` : on the parent (arc length of the parent);
+    ``side_branch`` : on the branch (arc length of the branch);
+    ``medina`` : "p,d,s" each 1 (%DS >= 50) or 0.
+    """
+
+    name: str
+    parent: str
+    branch: str
+    junction_world: tuple[float, float, float]
+    gap_mm: float
+    join_shift_mm: float
+    carina_s_mm: float
+    proximal_main: SegmentQCA
+    distal_main: SegmentQCA
+    side_branch: SegmentQCA
+    bifurcation_angle_deg: float
+    proximal_angle_deg: float
+    medina: str
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+def _segment_qca(s_mm: FloatArray, diameter_mm: FloatArray, reference_mm: FloatArray,
+                 start: float, end: float) -> SegmentQCA:
+    lo, hi = max(min(start, end), float(s_mm[0])), min(max(start, end), float(s_mm[-1]))
+    inside = (s_mm >= lo) & (s_mm <= hi)
+    if not np.any(inside):
+        inside[int(np.argmin(np.abs(s_mm - 0.5 * (start + end))))] = True
+    idx = np.flatnonzero(inside)
+    i_mld = int(idx[np.argmin(diameter_mm[idx])])
+    mld = float(diameter_mm[i_mld])
+    return SegmentQCA(
+        start_s_mm=float(lo),
+        end_s_mm=float(hi),
+        reference_diameter_mm=float(np.mean(reference_mm[idx])),
+        mld_mm=mld,
+        diameter_stenosis_pct=float(100.0 * (1.0 - mld / reference_mm[i_mld])),
+    )
+
+
+def bifurcation_qca(
+    name: str,
+    parent: str,
+    branch: str,
+    parent_X: FloatArray,
+    parent_profile: tuple[FloatArray, FloatArray, FloatArray],
+    branch_X: FloatArray,
+    branch_profile: tuple[FloatArray, FloatArray, FloatArray],
+    join_shift_mm: float,
+) -> BifurcationQCA:
+    """Bifurcation QCA (module docstring) from the two 3D centerlines and their profiles.
+
+    parent_X (P, 3), branch_X (N, 3) world mm; each profile is (s_mm,
+    smoothed diameter_mm, reference diameter_mm), arrays of the centerline's
+    length. ``join_shift_mm`` is how far the branch's start was moved to
+    join the parent (reported); ``gap_mm`` in the result is the distance
+    left between the branch's start and the parent's centerline.
+    """
+    s_p, d_p, ref_p = parent_profile
+    s_b, d_b, ref_b = branch_profile
+    radius_p = 0.5 * d_p
+    bif, prox, info = bifurcation_angles_deg(parent_X, radius_p, branch_X)
+    s_j, r_j, s_c = info["junction_s_mm"], info["junction_radius_mm"], info["carina_s_mm"]
+    proximal = _segment_qca(s_p, d_p, ref_p, s_j - r_j - QCA_SEGMENT_MM, s_j - r_j)
+    distal = _segment_qca(s_p, d_p, ref_p, s_j + r_j, s_j + r_j + QCA_SEGMENT_MM)
+    side = _segment_qca(s_b, d_b, ref_b, s_c, s_c + QCA_SEGMENT_MM)
+    medina = ",".join(str(int(q.diameter_stenosis_pct >= MEDINA_DS_PCT))
+                      for q in (proximal, distal, side))
+    J, _, _ = nearest_on_polyline(parent_X, branch_X[0])
+    return BifurcationQCA(
+        name=name,
+        parent=parent,
+        branch=branch,
+        junction_world=tuple(float(x) for x in J),
+        gap_mm=float(np.linalg.norm(J - branch_X[0])),
+        join_shift_mm=float(join_shift_mm),
+        carina_s_mm=float(s_c),
+        proximal_main=proximal,
+        distal_main=distal,
+        side_branch=side,
+        bifurcation_angle_deg=bif,
+        proximal_angle_deg=prox,
+        medina=medina,
+    )

@@ -1,0 +1,288 @@
+"""The vessel tree: every segment of the seeds in one reconstruction.
+
+    trace every segment in both views -> calibrate view B once on the whole
+    tree (every segment's ends, every feature; with self-calibration also
+    the matched centerline points of all of them, robust loss)
+    -> per segment, parents first: the stages of ``reconstruct_pair``
+       (matching, triangulation, sections, QCA) with the tree's calibration,
+       a branch joined to its parent at the bifurcation
+    -> branch QCA from the carina on, bifurcation QCA (recon.bifurcation)
+    -> one watertight mesh, the union of the branches (recon.surface)
+
+A tree of one segment is exactly ``reconstruct_pair`` of that segment.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, replace
+
+import numpy as np
+import trimesh
+
+from recon.bifurcation import BifurcationQCA, Junction, bifurcation_qca, carina_s_mm
+from recon.calibration import CalibrationResult, calibrate, refine_with_matches
+from recon.centerline import VesselnessMap, compute_vesselness
+from recon.errors import CoronaryError
+from recon.matching import match_centerlines
+from recon.measure import lumen_profile, measure_lumen
+from recon.pipeline import (
+    PipelineError,
+    Progress,
+    Reconstruction,
+    ReconstructionOptions,
+    _check_separation,
+    _notify,
+    _trace,
+    reconstruct_pair,
+)
+from recon.seeds import Seeds, Segment
+from recon.surface import TreeSurface, build_tree_surface
+from recon.types import Angiogram, Centerline2D
+
+__all__ = [
+    "TreeReconstruction",
+    "reconstruct_tree",
+    "tree_calibration",
+    "MATCHED_POINTS_PER_BRANCH",
+]
+
+#: Matched centerline pairs per branch that join the tree-wide calibration.
+MATCHED_POINTS_PER_BRANCH = 60
+
+
+@dataclass(frozen=True, eq=False)
+class TreeReconstruction:
+    """Every segment's reconstruction, the bifurcations and the tree's mesh.
+
+    ``branches[k]`` is segment k of the seeds (a full :class:`Reconstruction`
+    with view B calibrated on the whole tree; a branch's measurements are
+    taken from its carina on). The top-level properties are the first
+    segment's, so a tree reads like a one-segment reconstruction.
+    """
+
+    seeds: Seeds
+    branches: tuple[Reconstruction, ...]
+    bifurcations: tuple[BifurcationQCA, ...]
+    tree_surface: TreeSurface
+    calibration: CalibrationResult
+    timings_ms: dict
+
+    @property
+    def first(self) -> Reconstruction:
+        return self.branches[0]
+
+    @property
+    def measurements(self):
+        return self.first.measurements
+
+    @property
+    def warnings(self) -> tuple[str, ...]:
+        seen: dict[str, None] = {}
+        for rec in self.branches:
+            for line in rec.warnings:
+                seen.setdefault(line if rec is self.first else f"{self._name(rec)}: {line}")
+        return tuple(seen)
+
+    @property
+    def mesh(self) -> trimesh.Trimesh:
+        return self.tree_surface.mesh
+
+    def _name(self, rec: Reconstruction) -> str:
+        return self.seeds.segments[rec.options.segment].name
+
+    def report(self) -> dict:
+        """The first segment's report, plus ``branches``, ``bifurcations`` and ``tree``."""
+        out = self.first.report()
+        out["warnings"] = list(self.warnings)
+        out["branches"] = []
+        for rec in self.branches:
+            entry = rec.report()
+            entry["branch_id"] = rec.options.segment
+            entry["parent"] = self.seeds.segments[rec.options.segment].parent
+            out["branches"].append(entry)
+        out["bifurcations"] = [b.to_dict() for b in self.bifurcations]
+        mesh = self.tree_surface.mesh
+        out["tree"] = {
+            "segments": len(self.branches),
+            "mesh": {
+                "vertices": int(len(mesh.vertices)),
+                "faces": int(len(mesh.faces)),
+                "watertight": bool(mesh.is_watertight),
+                "components": self.tree_surface.components,
+                "cavities_removed": self.tree_surface.cavities,
+                "volume_mm3": float(mesh.volume),
+                "voxel_mm": self.tree_surface.voxel_mm,
+            },
+            "timings_ms": self.timings_ms,
+        }
+        return out
+
+
+def _tree_features(seeds: Seeds, traced: list[tuple[Centerline2D, Centerline2D]]
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """(K, 2) per view: every segment's traced ends, then every feature."""
+    pa = [cl_a.points_px[[0, -1]] for cl_a, _ in traced]
+    pb = [cl_b.points_px[[0, -1]] for _, cl_b in traced]
+    pa += [np.asarray([f.a_px]) for f in seeds.features]
+    pb += [np.asarray([f.b_px]) for f in seeds.features]
+    return np.vstack(pa), np.vstack(pb)
+
+
+def tree_calibration(angio_a: Angiogram, angio_b: Angiogram, seeds: Seeds,
+                     traced: list[tuple[Centerline2D, Centerline2D]],
+                     options: ReconstructionOptions) -> CalibrationResult:
+    """View B calibrated on the whole tree.
+
+    The features: every segment's ends and every feature (eq. 5). With
+    ``options.self_calibration`` and two or more segments the matched
+    centerline points of all of them (:data:`MATCHED_POINTS_PER_BRANCH`
+    each, matched under that first pose) are added with the robust loss
+    (:func:`recon.calibration.refine_with_matches`); off by default, as for
+    one segment (docs/benchmarks.md, the tree suite, has the measurement).
+    """
+    view_a, view_b = angio_a.geometry, angio_b.geometry
+    feat_a, feat_b = _tree_features(seeds, traced)
+    cal = calibrate(view_a, view_b, feat_a, feat_b, method=options.optimizer)
+    if len(traced) < 2 or options.optimizer != "palm" or not options.self_calibration:
+        return cal
+    matched_a, matched_b = [], []
+    for cl_a, cl_b in traced:
+        m = match_centerlines(cl_a, cl_b, view_a, cal.view_b, method=options.matcher)
+        stride = max(1, len(m.points_a_px) // MATCHED_POINTS_PER_BRANCH)
+        matched_a.append(m.points_a_px[::stride])
+        matched_b.append(m.points_b_px[::stride])
+    return refine_with_matches(view_a, view_b, feat_a, feat_b, np.vstack(matched_a),
+                               np.vstack(matched_b), initial=cal)
+
+
+def reconstruct_tree(
+    angio_a: Angiogram,
+    angio_b: Angiogram,
+    seeds: Seeds,
+    options: ReconstructionOptions | None = None,
+    progress: Progress | None = None,
+    vesselness: tuple[VesselnessMap, VesselnessMap] | None = None,
+) -> TreeReconstruction:
+    """Reconstruct every segment of ``seeds`` (module docstring); segment 0 first."""
+    options = options or ReconstructionOptions()
+    if not seeds.segments:
+        raise PipelineError("seeds: no segment to reconstruct (segments is empty)")
+    _check_separation(angio_a.geometry, angio_b.geometry, options.allow_close_views)
+    timings: dict[str, float] = {}
+    t0 = time.perf_counter()
+    _notify(progress, f"tracing {len(seeds.segments)} segment(s) in both views", 0.0)
+    view_a, view_b = angio_a.geometry, angio_b.geometry
+    if vesselness is None:
+        vesselness = (compute_vesselness(angio_a.image, pixel_mm=view_a.pixel_mm_at_isocenter),
+                      compute_vesselness(angio_b.image, pixel_mm=view_b.pixel_mm_at_isocenter))
+    traced = [_trace_both(angio_a, angio_b, seg, vesselness, options, len(seeds.segments))
+              for seg in seeds.segments]
+    timings["trace"] = _ms(t0)
+    if len(seeds.segments) == 1:  # exactly the one-segment reconstruction
+        rec = reconstruct_pair(angio_a, angio_b, seeds, replace(options, segment=0), progress,
+                               vesselness, traced=traced[0])
+        calibration = rec.calibration
+        branches = [rec]
+    else:
+        _notify(progress, "calibrating the geometry on the whole tree", 0.2)
+        t1 = time.perf_counter()
+        calibration = tree_calibration(angio_a, angio_b, seeds, traced, options)
+        timings["calibrate"] = _ms(t1)
+        branches = []
+        per_branch = replace(options, self_calibration=False)
+        for k, seg in enumerate(seeds.segments):
+            _notify(progress, f"segment {seg.name}", 0.3 + 0.5 * k / len(seeds.segments))
+            junction = None
+            if seg.parent is not None:
+                parent = branches[seeds.segment_index(seg.parent)]
+                junction = Junction(parent.centerline_3d.X_world,
+                                    np.sqrt(parent.surface.sections.area_mm2 / np.pi))
+            rec = reconstruct_pair(angio_a, angio_b, seeds, replace(per_branch, segment=k),
+                                   None, vesselness, traced=traced[k], calibration=calibration,
+                                   junction=junction)
+            if junction is not None:
+                rec = _from_carina(rec, junction)
+            branches.append(rec)
+    _notify(progress, "building the tree's surface", 0.85)
+    t1 = time.perf_counter()
+    if len(branches) == 1:  # the segment's own surface is the tree's
+        mesh = branches[0].surface.mesh
+        labels = trimesh.graph.connected_component_labels(mesh.face_adjacency, len(mesh.faces))
+        tree_surface = TreeSurface(mesh=mesh, components=int(labels.max()) + 1 if labels.size
+                                   else 0, voxel_mm=branches[0].surface.voxel_mm, grid_voxels=0)
+    else:
+        tree_surface = build_tree_surface([rec.surface.sections for rec in branches],
+                                          voxel_mm=options.voxel_mm)
+    timings["tree_surface"] = _ms(t1)
+    bifurcations = tuple(_bifurcation(seeds, branches, k)
+                         for k, seg in enumerate(seeds.segments) if seg.parent is not None)
+    timings["total"] = _ms(t0)
+    _notify(progress, "done", 1.0)
+    return TreeReconstruction(seeds=seeds, branches=tuple(branches), bifurcations=bifurcations,
+                              tree_surface=tree_surface, calibration=calibration,
+                              timings_ms=timings)
+
+
+def _trace_both(angio_a: Angiogram, angio_b: Angiogram, seg: Segment,
+                vesselness: tuple[VesselnessMap, VesselnessMap], options: ReconstructionOptions,
+                n_segments: int) -> tuple[Centerline2D, Centerline2D]:
+    """One segment's traces in A and B; in a tree, a failure names the segment."""
+    view_a, view_b = angio_a.geometry, angio_b.geometry
+    try:
+        return (_trace(angio_a, seg.a, vesselness[0], "A", view_a.pixel_mm_at_isocenter,
+                       options.intensity_a),
+                _trace(angio_b, seg.b, vesselness[1], "B", view_b.pixel_mm_at_isocenter,
+                       options.intensity_b))
+    except CoronaryError as err:
+        if n_segments == 1:
+            raise
+        raise PipelineError(f"segment {seg.name!r}: {err}") from err
+
+
+def _ms(since: float) -> float:
+    return round((time.perf_counter() - since) * 1000.0, 2)
+
+
+def _from_carina(rec: Reconstruction, junction: Junction) -> Reconstruction:
+    """A branch's profile and measurements from its carina on (the stretch before
+    lies inside the parent's lumen); arc lengths stay the branch's own."""
+    cl = rec.centerline_3d
+    s_c = carina_s_mm(cl.X_world, junction.parent_X_world, junction.parent_radius_mm)
+    keep = cl.s_mm >= s_c
+    if np.count_nonzero(keep) < 12:  # too short beyond the carina: the whole branch
+        return rec
+    profile = lumen_profile(cl.s_mm[keep], rec.surface.sections.area_mm2[keep])
+    return replace(rec, profile=profile, measurements=measure_lumen(profile))
+
+
+def _profile_on(rec: Reconstruction) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(s, smoothed diameter, reference) (M,) over the whole centerline of a branch.
+
+    The part before a branch's carina (no profile there) takes the first
+    profile values.
+    """
+    s = rec.centerline_3d.s_mm
+    p = rec.profile
+    d = np.interp(s, p.s_mm, p.diameter_smooth_mm)
+    ref = np.interp(s, p.s_mm, p.reference_diameter_mm)
+    return s, d, ref
+
+
+def _bifurcation(seeds: Seeds, branches: list[Reconstruction], k: int) -> BifurcationQCA:
+    seg = seeds.segments[k]
+    parent = branches[seeds.segment_index(seg.parent)]
+    branch = branches[k]
+    shift = float(np.linalg.norm(branch.centerline_3d.X_world[0]
+                                 - _unjoined_start(branch)))
+    return bifurcation_qca(
+        seg.bifurcation, seg.parent, seg.name,
+        parent.centerline_3d.X_world, _profile_on(parent),
+        branch.centerline_3d.X_world, _profile_on(branch), shift,
+    )
+
+
+def _unjoined_start(rec: Reconstruction) -> np.ndarray:
+    """Where the branch began before the join, to within the smoothing: its first
+    triangulated (raw) point."""
+    return rec.centerline_3d.X_raw_world[0]

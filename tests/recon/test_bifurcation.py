@@ -1,0 +1,77 @@
+"""recon.bifurcation: the join of a branch to its parent and bifurcation QCA, on exact geometry."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from recon.bifurcation import (
+    Junction,
+    bifurcation_angles_deg,
+    bifurcation_qca,
+    carina_s_mm,
+    nearest_on_polyline,
+)
+from recon.types import Centerline3D, arclength
+
+
+def _line(start, direction, length_mm: float, step: float = 0.1) -> np.ndarray:
+    d = np.asarray(direction, float) / np.linalg.norm(direction)
+    return np.asarray(start, float) + np.arange(0.0, length_mm + 1e-9, step)[:, None] * d
+
+
+def _y(theta_deg: float, r_parent: float = 1.5):
+    """A straight parent along x (60 mm) and a branch leaving it at x = 30 at theta."""
+    parent = _line([0, 0, 0], [1, 0, 0], 60.0)
+    t = np.deg2rad(theta_deg)
+    branch = _line([30, 0, 0], [np.cos(t), np.sin(t), 0.0], 30.0)
+    return parent, np.full(len(parent), r_parent), branch
+
+
+@pytest.mark.parametrize("theta", [30.0, 55.0, 80.0])
+def test_angles_of_a_straight_y_are_the_construction_angles(theta):
+    parent, r, branch = _y(theta)
+    bif, prox, info = bifurcation_angles_deg(parent, r, branch)
+    assert bif == pytest.approx(theta, abs=0.05)
+    assert prox == pytest.approx(180.0 - theta, abs=0.05)
+    # the branch leaves the lumen where its distance to the axis reaches the radius
+    assert info["carina_s_mm"] == pytest.approx(1.5 / np.sin(np.deg2rad(theta)), abs=0.11)
+    assert info["junction_s_mm"] == pytest.approx(30.0, abs=1e-9)
+
+
+def test_the_join_moves_the_start_onto_the_parent_and_keeps_the_branch_beyond_the_carina():
+    parent, r, branch = _y(45.0)
+    off = branch + np.array([0.0, 0.0, 0.6])  # triangulated 0.6 mm off the parent
+    T = np.gradient(off, axis=0)
+    T /= np.linalg.norm(T, axis=1)[:, None]
+    cl = Centerline3D(X_world=off, s_mm=arclength(off), tangents=T,
+                      radius_a_mm=np.ones(len(off)), radius_b_mm=np.ones(len(off)),
+                      X_raw_world=off, points_a_px=np.zeros((len(off), 2)),
+                      points_b_px=np.zeros((len(off), 2)))
+    joined = Junction(parent, r).join(cl)
+    foot, _, _ = nearest_on_polyline(parent, joined.X_world[0])
+    assert np.linalg.norm(joined.X_world[0] - foot) < 1e-9  # no gap
+    s_c = carina_s_mm(off, parent, r)
+    beyond = cl.s_mm >= s_c
+    np.testing.assert_allclose(joined.X_world[beyond], off[beyond], atol=1e-12)
+    assert np.all(np.linalg.norm(joined.tangents, axis=1) == pytest.approx(1.0))
+
+
+def test_qca_finds_the_lesions_and_the_medina_class():
+    parent, r, branch = _y(50.0, r_parent=1.5)
+    s_p, s_b = arclength(parent), arclength(branch)
+    ref_p, ref_b = np.full(len(s_p), 3.0), np.full(len(s_b), 2.0)
+    # a 60 % lesion in the distal main just beyond the carina, a 30 % one at the side ostium
+    d_p = ref_p * (1 - 0.6 * np.exp(-(((s_p - 35.0) / 1.5) ** 2)))
+    d_b = ref_b * (1 - 0.3 * np.exp(-(((s_b - 5.0) / 1.5) ** 2)))
+    q = bifurcation_qca("LAD/D1", "LAD", "D1", parent, (s_p, d_p, ref_p), branch,
+                        (s_b, d_b, ref_b), join_shift_mm=0.2)
+    assert q.medina == "0,1,0"
+    assert q.distal_main.mld_mm == pytest.approx(1.2, abs=0.01)
+    assert q.distal_main.diameter_stenosis_pct == pytest.approx(60.0, abs=0.5)
+    assert q.side_branch.diameter_stenosis_pct == pytest.approx(30.0, abs=0.5)
+    assert q.proximal_main.reference_diameter_mm == pytest.approx(3.0)
+    assert q.proximal_main.end_s_mm == pytest.approx(30.0 - 1.5 * (1 - 0.0), abs=0.2)
+    assert q.bifurcation_angle_deg == pytest.approx(50.0, abs=0.05)
+    assert q.gap_mm < 1e-9 and q.join_shift_mm == 0.2
+    assert set(q.to_dict()["side_branch"]) >= {"mld_mm", "reference_diameter_mm"}

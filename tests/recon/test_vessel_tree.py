@@ -1,0 +1,130 @@
+"""recon.tree: a phantom tree reconstructed in one job, against its truth."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from support import run_cli
+from vtkmodules.util.numpy_support import vtk_to_numpy
+from vtkmodules.vtkIOXML import vtkXMLPolyDataReader
+
+from recon.bench.reconstruct import case_angiograms
+from recon.bench.tree import _branch_truth
+from recon.bifurcation import bifurcation_angles_deg, nearest_on_polyline
+from recon.io.outputs import outputs_as_bytes
+from recon.io.seeds_file import save_seeds
+from recon.pipeline import reconstruct_pair
+from recon.synth import make_phantom
+from recon.synth.tree import make_tree_case, tree_seeds
+from recon.tree import reconstruct_tree
+
+
+@pytest.fixture(scope="module")
+def tree_case():
+    tc = make_tree_case("data1", 0, "both")
+    assert len(tc.seeds.segments) >= 3  # the main and at least two branches
+    a, b = case_angiograms(tc.case)
+    return tc, reconstruct_tree(a, b, tc.seeds)
+
+
+def test_branches_meet_at_their_bifurcations_and_the_angles_match_the_truth(tree_case):
+    tc, rec = tree_case
+    truth = tc.case.truth
+    assert len(rec.bifurcations) == len(tc.seeds.segments) - 1
+    main_X, main_r = truth.vessels[0]
+    for bq in rec.bifurcations:
+        j = tc.seeds.segment_index(bq.branch)
+        start = rec.branches[j].centerline_3d.X_world[0]
+        foot, _, _ = nearest_on_polyline(rec.branches[0].centerline_3d.X_world, start)
+        assert np.linalg.norm(start - foot) <= 0.1  # no gap
+        assert bq.gap_mm <= 0.1
+        true_angle, _, _ = bifurcation_angles_deg(main_X, main_r, truth.vessels[tc.vessels[j]][0])
+        assert bq.bifurcation_angle_deg == pytest.approx(true_angle, abs=5.0)
+        assert bq.medina in {f"{p},{d},{s}" for p in "01" for d in "01" for s in "01"}
+
+
+def test_lesions_are_measured_on_every_branch_and_view_b_beats_its_header(tree_case):
+    tc, rec = tree_case
+    lesions = 0
+    for j, branch in enumerate(rec.branches):
+        mld_true, ref_true = _branch_truth(tc, j)
+        if mld_true < 0.75 * ref_true:  # the main's and the narrowed ostium's
+            lesions += 1
+            assert branch.measurements.mld_mm == pytest.approx(mld_true, abs=0.2)
+            assert branch.measurements.reference_diameter_mm == pytest.approx(ref_true, abs=0.3)
+        # every branch's 3D centerline lies on its vessel in both views
+        assert branch.metrics["a"]["rms_px"] < 2.0 and branch.metrics["b"]["rms_px"] < 2.0
+    assert lesions >= 2
+    from recon.bench.common import pose_error
+
+    X = tc.case.truth.segment_X_world
+    assert (pose_error(rec.first.view_b, tc.case.view_b_true, X)[1]
+            < pose_error(tc.case.view_b_nominal, tc.case.view_b_true, X)[1])
+
+
+def test_the_tree_mesh_is_one_watertight_union(tree_case):
+    _, rec = tree_case
+    mesh = rec.tree_surface.mesh
+    assert rec.tree_surface.components == 1
+    assert mesh.is_watertight and mesh.is_winding_consistent and mesh.volume > 0
+    assert len(mesh.split(only_watertight=False)) == 1
+    # the union holds less than the branches counted apart (they overlap at each bifurcation)
+    assert mesh.volume < sum(b.surface.mesh.volume for b in rec.branches)
+    assert mesh.volume > rec.branches[0].surface.mesh.volume
+
+
+def test_outputs_carry_every_branch(tree_case, tmp_path):
+    tc, rec = tree_case
+    files = outputs_as_bytes(rec)
+    report = json.loads(files["report.json"])
+    single = set(rec.first.report())
+    assert single <= set(report)  # today's keys, for the first segment
+    assert len(report["branches"]) == len(tc.seeds.segments)
+    assert set(report["branches"][1]) >= single
+    assert report["measurements"] == rec.first.measurements.to_dict()
+    assert report["tree"]["mesh"]["components"] == 1
+    assert {"bifurcation_angle_deg", "medina", "side_branch"} <= set(report["bifurcations"][0])
+    lines = files["centerline.csv"].decode().splitlines()
+    assert lines[0].split(",")[-1] == "branch"
+    branch = np.array([int(line.rsplit(",", 1)[1]) for line in lines[1:]])
+    counts = [len(b.centerline_3d.s_mm) for b in rec.branches]
+    assert np.array_equal(branch, np.repeat(np.arange(len(counts)), counts))
+    (tmp_path / "c.vtp").write_bytes(files["centerline.vtp"])
+    reader = vtkXMLPolyDataReader()
+    reader.SetFileName(str(tmp_path / "c.vtp"))
+    reader.Update()
+    poly = reader.GetOutput()
+    assert poly.GetNumberOfLines() == len(counts)
+    assert np.array_equal(vtk_to_numpy(poly.GetPointData().GetArray("BranchId")), branch)
+    assert poly.GetPointData().GetArray("Radius") is not None
+
+
+def test_a_tree_of_one_segment_is_the_one_segment_reconstruction():
+    case = make_phantom("data2", 3)
+    a, b = case_angiograms(case)
+    tree = reconstruct_tree(a, b, case.seeds)
+    single = reconstruct_pair(a, b, case.seeds)
+    np.testing.assert_array_equal(tree.first.centerline_3d.X_world, single.centerline_3d.X_world)
+    assert tree.first.measurements == single.measurements
+    assert tree.bifurcations == ()
+
+
+def test_reconstruct_on_the_command_line_does_every_segment_or_the_one_named(tmp_path):
+    case = make_phantom("static", 7, render=False)  # the demo case
+    seeds, _, _ = tree_seeds(np.random.default_rng(1), case)
+    path = tmp_path / "tree.json"
+    save_seeds(seeds, path)
+    out = tmp_path / "out"
+    proc = run_cli("reconstruct", "--demo", "--seeds", str(path), "--out", str(out))
+    assert proc.returncode == 0, proc.stderr
+    report = json.loads((out / "report.json").read_text())
+    assert [b["inputs"]["segment"] for b in report["branches"]] == ["main", "branch 1"]
+    assert report["bifurcations"][0]["gap_mm"] <= 0.1
+    assert "branch 1: length" in proc.stderr and "Medina" in proc.stderr
+    proc = run_cli("reconstruct", "--demo", "--seeds", str(path), "--segment", "LCX",
+                   "--out", str(tmp_path / "x"))
+    assert proc.returncode == 2
+    assert proc.stderr.count("\n") == 1 and "no segment 'LCX'" in proc.stderr
+    assert not (tmp_path / "x").exists()
