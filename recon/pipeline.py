@@ -208,10 +208,23 @@ def _features(seeds: Seeds, segment_index: int, cl_a: Centerline2D | None = None
 
 def calibrate_from_seeds(
     angio_a: Angiogram, angio_b: Angiogram, seeds: Seeds, optimizer: str = "palm",
-    segment: int = 0,
+    segment: int = 0, vesselness: tuple[VesselnessMap, VesselnessMap] | None = None,
+    intensity: tuple[str, str] = ("auto", "auto"),
 ) -> CalibrationResult:
-    """Calibrate view B on the clicked correspondences alone (the viewer's Calibrate)."""
-    pa, pb = _features(seeds, segment)
+    """Calibrate view B on the clicked correspondences (the viewer's Calibrate).
+
+    With ``vesselness`` (both views' maps) the segment is traced first and its traced
+    ends are used, exactly as in :func:`reconstruct_pair`'s calibration step, so both
+    report the same figures for the same clicks; without, the clicked ends are used.
+    """
+    cl_a = cl_b = None
+    if vesselness is not None:
+        seg = _segment(seeds, segment)
+        cl_a = _trace(angio_a, seg.a, vesselness[0], "A",
+                      angio_a.geometry.pixel_mm_at_isocenter, intensity[0])
+        cl_b = _trace(angio_b, seg.b, vesselness[1], "B",
+                      angio_b.geometry.pixel_mm_at_isocenter, intensity[1])
+    pa, pb = _features(seeds, segment, cl_a, cl_b)
     return calibrate(angio_a.geometry, angio_b.geometry, pa, pb, method=optimizer)
 
 

@@ -37,9 +37,8 @@ from recon.seeds import Seeds
 from recon.types import Angiogram
 from viewer_app import scene
 from viewer_app.panels import Panels, build_panels
-from viewer_app.scene import PANEL_SHIFT, View
+from viewer_app.scene import LAYOUTS, ModelNodes, View
 from viewer_app.state import (
-    MODE_LABELS,
     Autosave,
     Mark,
     MarkState,
@@ -107,19 +106,77 @@ class ViewerApp:
         self.progress_log: list[tuple[str, float]] = []
         self._tmpdir = tempfile.TemporaryDirectory(prefix="coronary3d-viewer-")
         self._busy = False
+        self.layout = LAYOUTS[0]  # what the page shows: one of scene.LAYOUTS
+        self.model: ModelNodes | None = None
 
         angio_a = load_angiogram(path_a, frame=frame_a)
         angio_b = load_angiogram(path_b, frame=frame_b)
         seeds = load_seeds(seeds_path) if seeds_path is not None else None
 
         self.server = viser.ViserServer(host=host, port=port, verbose=False)
-        self.server.scene.set_up_direction("-y")
-        self.server.initial_camera.position = (PANEL_SHIFT, -0.05, -1.5)
-        self.server.initial_camera.look_at = (PANEL_SHIFT, -0.05, 0.0)
-        self.server.initial_camera.up = (0.0, -1.0, 0.0)
-        self.server.gui.configure_theme(control_width="large", show_share_button=False)
+        self._setup_page()
         self.panels: Panels = build_panels(self.server.gui, self)
         self._set_pair(angio_a, angio_b, Path(path_a).name, Path(path_b).name, seeds, seeds_path)
+
+    # ================================================================ page
+    def _setup_page(self) -> None:
+        """Theme, the straight camera on the angiograms, and per-client camera handling."""
+        self.server.scene.set_up_direction("-y")
+        self.server.gui.configure_theme(control_width="large", show_share_button=False)
+        self.server.gui.main_panel.dock_right()  # the canvas is not under the panel
+        cam = self.server.initial_camera
+        cam.fov = scene.CAMERA_FOV_RAD
+        cam.up = (0.0, -1.0, 0.0)
+        self.server.on_client_connect(self._on_connect)
+
+    def _initial_camera(self) -> None:
+        """The camera a (re)loaded page starts with: the current layout's framing."""
+        fr = scene.layout_framing(self.layout, self.views,
+                                  None if self.model is None else self.model.position)
+        dist = scene.camera_distance(fr, aspect=1.1)  # canvas beside the fixed panel
+        cam = self.server.initial_camera
+        cam.look_at = tuple(fr.centre)
+        cam.position = tuple(fr.centre - scene.STRAIGHT * dist)
+
+    def _on_connect(self, client: viser.ClientHandle) -> None:
+        """A page (re)loaded: frame its camera on the current layout; a user's rotation in
+        an angiogram layout turns the page to the 3D model (the angiograms never tilt)."""
+        def on_camera(_camera: object) -> None:
+            if self.layout == "3D model" or self._framing_now:
+                return
+            if scene.camera_rotated_deg(client) > scene.ROTATED_DEG:
+                self.set_layout("3D model" if self.model is not None else "Angiograms",
+                                client=client)
+
+        client.camera.on_update(on_camera)
+        self._frame_client(client)
+
+    _framing_now = False
+
+    def _frame_client(self, client: viser.ClientHandle) -> None:
+        fr = scene.layout_framing(self.layout, self.views,
+                                  None if self.model is None else self.model.position)
+        self._framing_now = True
+        try:
+            scene.apply_framing(client, fr)
+        except Exception:  # a client that went away
+            log.debug("camera framing failed", exc_info=True)
+        finally:
+            self._framing_now = False
+
+    def set_layout(self, layout: str, client: object | None = None) -> None:
+        """Show "Angiograms" (straight on both images), "Angiograms + 3D" or "3D model"
+        (the model alone, the camera orbiting it)."""
+        with self._lock:
+            fr = scene.layout_framing(layout, self.views,
+                                      None if self.model is None else self.model.position)
+            self.layout = layout
+            scene.set_visibility(self.views, None if self.model is None else self.model.root,
+                                 fr)
+            self.panels.show_layout(layout)
+            self._initial_camera()
+        for c in list(self.server.get_clients().values()):
+            self._frame_client(c)
 
     # ================================================================ basics
     @property
@@ -183,6 +240,7 @@ class ViewerApp:
             self.state = MarkState(angio_a.geometry, angio_b.geometry, snapper=self._snap)
             self.reconstruction = None
             self.calibration = None
+            self.model = None
             if seeds is not None:
                 self.state.load_seeds(seeds)
             path = self._autosave_arg or default_autosave_path(angio_a.path, angio_b.path)
@@ -194,6 +252,7 @@ class ViewerApp:
             self.panels.show_pair(self.views)
             self._clear_results()
             self._redraw_marks()
+        self.set_layout("Angiograms")
         for view in self.views.values():  # vesselness in the background, once per image
             threading.Thread(target=self._warm_vesselness, args=(view,), daemon=True).start()
 
@@ -300,18 +359,16 @@ class ViewerApp:
                 return None
             self._redraw_marks()
             self.last_click_ms = (time.perf_counter() - t0) * 1e3
-            if self.state.last_message:
-                self.notify("Mark placed raw", f"{view.upper()}: {self.state.last_message}",
-                            "warning", client)
+            if self.state.last_message:  # shown in the marks panel, not as a toast over A
+                log.info("mark placed raw in %s: %s", view.upper(), self.state.last_message)
             self._autosave()
             return mark
 
     def set_mode(self, mode: str) -> None:
-        """One of "proximal", "waypoint", "distal", "feature"."""
+        """One of "guided", "proximal", "waypoint", "distal", "feature"."""
         with self._lock:
             self.state.set_mode(mode)
-            if self.panels.marks.mode.value != MODE_LABELS[mode]:
-                self.panels.marks.mode.value = MODE_LABELS[mode]
+            self._redraw_marks()
 
     def set_segment(self, name: str) -> None:
         """Make the segment called ``name`` the current one (an unknown name is ignored)."""
@@ -420,7 +477,11 @@ class ViewerApp:
             with self._lock:
                 seeds, segment = self._seeds_for_run()
                 a, b = self.views["a"].angio, self.views["b"].angio
-            res = calibrate_from_seeds(a, b, seeds, optimizer="palm", segment=segment)
+            maps = (self.views["a"].get_vesselness(), self.views["b"].get_vesselness())
+            # The same traced ends as Reconstruct's calibration step: the same figures.
+            res = calibrate_from_seeds(a, b, seeds, optimizer="palm", segment=segment,
+                                       vesselness=maps,
+                                       intensity=(self.intensity["a"], self.intensity["b"]))
             with self._lock:
                 self.calibration = res
                 self.state.set_calibrated_b(res.view_b)
@@ -494,17 +555,19 @@ class ViewerApp:
 
     def _clear_results(self) -> None:
         scene.clear_results(self.server.scene, self.views)
+        self.model = None
         self.panels.clear_results()
 
     def _show_reconstruction(self, rec: Reconstruction) -> None:
-        """Traces and back-projections on the images, mesh + 3D centerline, table, plot."""
-        self.model_position = scene.draw_reconstruction(self.server.scene, self.views, rec)
-        scene.frame_camera_on(self.server, self.model_position, scene.MODEL_SIZE)
+        """Traces, back-projections and lesion marks on the images, the coloured mesh,
+        the results table and the profile; the page shows the angiograms and the model."""
+        self.model = scene.draw_reconstruction(self.server.scene, self.views, rec)
         self.panels.show_reconstruction(rec)
+        self.set_layout("Angiograms + 3D")
 
     def view_all(self) -> None:
-        """Camera on both images and the model."""
-        scene.view_all(self.server)
+        """Camera straight on both images and the model."""
+        self.set_layout("Angiograms + 3D" if self.model is not None else "Angiograms")
 
     # ================================================================ export
     def export(self, kind: str) -> bytes:

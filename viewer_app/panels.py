@@ -33,6 +33,7 @@ from viewer_app.results import (
     marks_markdown,
     results_markdown,
 )
+from viewer_app.scene import LAYOUTS
 from viewer_app.state import MODE_LABELS, MODES
 
 if TYPE_CHECKING:
@@ -98,6 +99,7 @@ class CasePanel:
 class MarksPanel:
     """Click mode, segments, the selected mark, undo / clear and the marks summary."""
 
+    guide: viser.GuiMarkdownHandle  # what the next click in A and in B places
     mode: viser.GuiDropdownHandle
     segment: viser.GuiDropdownHandle
     new_segment: viser.GuiButtonHandle
@@ -129,7 +131,7 @@ class ResultsPanel:
 
     reconstruct: viser.GuiButtonHandle
     progress: viser.GuiProgressBarHandle
-    view_all: viser.GuiButtonHandle
+    layout: viser.GuiDropdownHandle  # Angiograms / Angiograms + 3D / 3D model
     markdown: viser.GuiMarkdownHandle
     plot: viser.GuiImageHandle
 
@@ -183,7 +185,10 @@ class Panels:
     def show_marks(self, st: MarkState, last_click_ms: float, autosave_path: str | Path) -> None:
         """The segment and selection lists, and the marks summary."""
         panel = self.marks
+        panel.guide.content = st.guide_text()
         with self.refreshing.during():
+            if panel.mode.value != MODE_LABELS[st.mode]:
+                panel.mode.value = MODE_LABELS[st.mode]
             panel.segment.options = tuple(st.segment_names)
             panel.segment.value = st.segment_names[st.current_segment]
             options = ["(none)"] + [f"{m.view.upper()} {st.label(m)} #{m.id}" for m in st.marks]
@@ -192,6 +197,11 @@ class Panels:
             panel.select.value = (options[[m.id for m in st.marks].index(sel.id) + 1]
                                   if sel is not None else "(none)")
         panel.summary.content = marks_markdown(st, last_click_ms, autosave_path)
+
+    def show_layout(self, layout: str) -> None:
+        with self.refreshing.during():
+            if self.results.layout.value != layout:
+                self.results.layout.value = layout
 
     def show_calibration(self, res: CalibrationResult) -> None:
         self.calibrate.markdown.content = calibration_markdown(res)
@@ -215,15 +225,14 @@ class Panels:
 def build_panels(gui: viser.GuiApi, app: ViewerApp) -> Panels:
     """Add every folder to the control panel, in order, with its callbacks."""
     refreshing = Refreshing()
-    return Panels(
-        case=_case_panel(gui, app, refreshing),
-        marks=_marks_panel(gui, app, refreshing),
-        seeds=_seeds_panel(gui, app),
-        calibrate=_calibrate_panel(gui, app),
-        results=_results_panel(gui, app),
-        export=_export_panel(gui, app),
-        refreshing=refreshing,
-    )
+    marks = _marks_panel(gui, app, refreshing)  # the workflow first
+    results = _results_panel(gui, app, refreshing)
+    calibrate = _calibrate_panel(gui, app)
+    case = _case_panel(gui, app, refreshing)
+    seeds = _seeds_panel(gui, app)
+    export = _export_panel(gui, app)
+    return Panels(case=case, marks=marks, seeds=seeds, calibrate=calibrate, results=results,
+                  export=export, refreshing=refreshing)
 
 
 def _case_panel(gui: viser.GuiApi, app: ViewerApp, refreshing: Refreshing) -> CasePanel:
@@ -316,12 +325,13 @@ def _marks_panel(gui: viser.GuiApi, app: ViewerApp, refreshing: Refreshing) -> M
     # Python fires these callbacks later on viser's event loop (client None), when
     # the value read may already be stale: only a user's change may act.
     with gui.add_folder("Marks"):
+        guide = gui.add_markdown("")
         mode = gui.add_dropdown("Mode", [MODE_LABELS[m] for m in MODES],
-                                initial_value=MODE_LABELS["proximal"])
+                                initial_value=MODE_LABELS["guided"])
 
         @mode.on_update
         async def _(event: viser.GuiEvent) -> None:
-            if event.client is None:
+            if refreshing.active or event.client is None:
                 return
             app.set_mode(label_to_mode[mode.value])
 
@@ -361,8 +371,8 @@ def _marks_panel(gui: viser.GuiApi, app: ViewerApp, refreshing: Refreshing) -> M
             app.clear()
 
         summary = gui.add_markdown("")
-    return MarksPanel(mode=mode, segment=segment, new_segment=new_segment, select=select,
-                      undo=undo, clear=clear, summary=summary)
+    return MarksPanel(guide=guide, mode=mode, segment=segment, new_segment=new_segment,
+                      select=select, undo=undo, clear=clear, summary=summary)
 
 
 def _seeds_panel(gui: viser.GuiApi, app: ViewerApp) -> SeedsPanel:
@@ -409,7 +419,7 @@ def _calibrate_panel(gui: viser.GuiApi, app: ViewerApp) -> CalibratePanel:
     return CalibratePanel(button=button, markdown=markdown)
 
 
-def _results_panel(gui: viser.GuiApi, app: ViewerApp) -> ResultsPanel:
+def _results_panel(gui: viser.GuiApi, app: ViewerApp, refreshing: Refreshing) -> ResultsPanel:
     with gui.add_folder("Reconstruct"):
         reconstruct = gui.add_button("Reconstruct", icon=viser.Icon.PLAYER_PLAY, color="green")
 
@@ -422,16 +432,18 @@ def _results_panel(gui: viser.GuiApi, app: ViewerApp) -> ResultsPanel:
                 reconstruct.disabled = False
 
         progress = gui.add_progress_bar(0.0, animated=False)
-        view_all = gui.add_button("Camera: images + model", icon=viser.Icon.EYE)
+        layout = gui.add_dropdown("Show", list(LAYOUTS), initial_value=LAYOUTS[0])
 
-        @view_all.on_click
+        @layout.on_update
         def _(event: viser.GuiEvent) -> None:
-            app.view_all()
+            if refreshing.active or event.client is None:
+                return
+            app.guard("Show", event.client, lambda: app.set_layout(str(layout.value)))
 
         markdown = gui.add_markdown("")
         plot = gui.add_image(np.full((8, 8, 3), 255, np.uint8),
                              label="Diameter along the vessel", visible=False)
-    return ResultsPanel(reconstruct=reconstruct, progress=progress, view_all=view_all,
+    return ResultsPanel(reconstruct=reconstruct, progress=progress, layout=layout,
                         markdown=markdown, plot=plot)
 
 

@@ -54,7 +54,7 @@ READY_JS = """
   const m = window.__viserMutable;
   if (!m || !m.nodeRefFromName) return false;
   if (document.body.innerText.includes("Connecting")) return false;
-  return ["/view_a", "/view_b", "/view_a/marks"].every((n) => {
+  return ["/view_a", "/view_b", "/over_a/marks"].every((n) => {
     const r = m.nodeRefFromName[n];
     return r && (r.current !== undefined ? r.current : r);
   });
