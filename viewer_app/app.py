@@ -54,6 +54,7 @@ __all__ = ["ViewerApp", "run_viewer", "EXPORT_KINDS"]
 log = logging.getLogger(__name__)
 
 SNAP_MAX_PX = 8.0
+FRAMING_SETTLE_S = 1.5  # camera updates this soon after the app moved the camera are its own
 EXPORT_KINDS = (*MESH_FORMATS, "centerline.csv", "report.json", "seeds.json")
 
 FloatArray = NDArray[np.float64]
@@ -108,6 +109,9 @@ class ViewerApp:
         self._busy = False
         self.layout = LAYOUTS[0]  # what the page shows: one of scene.LAYOUTS
         self.model: ModelNodes | None = None
+        self.lesion: dict[str, float] | None = None  # lesion ends set by hand (mm), if any
+        self._framed_aspect: dict[int, float] = {}  # client id -> canvas aspect when framed
+        self._framed_at: dict[int, float] = {}  # client id -> time.monotonic() when framed
 
         angio_a = load_angiogram(path_a, frame=frame_a)
         angio_b = load_angiogram(path_b, frame=frame_b)
@@ -124,9 +128,7 @@ class ViewerApp:
         self.server.scene.set_up_direction("-y")
         self.server.gui.configure_theme(control_width="large", show_share_button=False)
         self.server.gui.main_panel.dock_right()  # the canvas is not under the panel
-        cam = self.server.initial_camera
-        cam.fov = scene.CAMERA_FOV_RAD
-        cam.up = (0.0, -1.0, 0.0)
+        self.server.initial_camera.up = (0.0, -1.0, 0.0)
         self.server.on_client_connect(self._on_connect)
 
     def _initial_camera(self) -> None:
@@ -142,9 +144,14 @@ class ViewerApp:
         """A page (re)loaded: frame its camera on the current layout; a user's rotation in
         an angiogram layout turns the page to the 3D model (the angiograms never tilt)."""
         def on_camera(_camera: object) -> None:
-            if self.layout == "3D model" or self._framing_now:
-                return
-            if scene.camera_rotated_deg(client) > scene.ROTATED_DEG:
+            if self._framing_now or time.monotonic() - self._framed_at.get(
+                    client.client_id, 0.0) < FRAMING_SETTLE_S:
+                return  # our own camera move (the page animates it) is not the user's
+            framed = self._framed_aspect.get(client.client_id)
+            if framed is not None and abs(float(client.camera.aspect) - framed) > 0.02:
+                self._frame_client(client)  # the canvas changed size (panel docked, resize)
+            elif (self.layout != "3D model"
+                  and scene.camera_rotated_deg(client) > scene.ROTATED_DEG):
                 self.set_layout("3D model" if self.model is not None else "Angiograms",
                                 client=client)
 
@@ -158,6 +165,8 @@ class ViewerApp:
                                   None if self.model is None else self.model.position)
         self._framing_now = True
         try:
+            self._framed_aspect[client.client_id] = float(client.camera.aspect)
+            self._framed_at[client.client_id] = time.monotonic()
             scene.apply_framing(client, fr)
         except Exception:  # a client that went away
             log.debug("camera framing failed", exc_info=True)
@@ -556,6 +565,7 @@ class ViewerApp:
     def _clear_results(self) -> None:
         scene.clear_results(self.server.scene, self.views)
         self.model = None
+        self.lesion = None
         self.panels.clear_results()
 
     def _show_reconstruction(self, rec: Reconstruction) -> None:
@@ -564,6 +574,24 @@ class ViewerApp:
         self.model = scene.draw_reconstruction(self.server.scene, self.views, rec)
         self.panels.show_reconstruction(rec)
         self.set_layout("Angiograms + 3D")
+
+    def set_lesion(self, start_mm: float, end_mm: float) -> dict[str, float]:
+        """Lesion ends set by the clinician (mm along the vessel): the measurements, the
+        chart and the MLD / lesion marks on the images and the model follow."""
+        from viewer_app.results import lesion_measurements
+
+        with self._lock:
+            rec = self.reconstruction
+            if rec is None or self.model is None:
+                raise ValueError("lesion: reconstruct first")
+            lesion = lesion_measurements(rec.profile, start_mm, end_mm)
+            self.lesion = lesion
+            self.panels.show_lesion(rec, lesion)
+            marks = {"MLD": lesion["mld_s_mm"], "lesion start": lesion["lesion_start_s_mm"],
+                     "lesion end": lesion["lesion_end_s_mm"]}
+            scene.draw_lesion_marks(self.server.scene, self.views, rec, self.model, marks,
+                                    lesion["mld_mm"])
+            return lesion
 
     def view_all(self) -> None:
         """Camera straight on both images and the model."""

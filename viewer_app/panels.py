@@ -29,6 +29,7 @@ from viewer_app.results import (
     NO_RECONSTRUCTION_TEXT,
     NOT_CALIBRATED_TEXT,
     calibration_markdown,
+    clinical_markdown,
     info_markdown,
     marks_markdown,
     results_markdown,
@@ -132,8 +133,11 @@ class ResultsPanel:
     reconstruct: viser.GuiButtonHandle
     progress: viser.GuiProgressBarHandle
     layout: viser.GuiDropdownHandle  # Angiograms / Angiograms + 3D / 3D model
-    markdown: viser.GuiMarkdownHandle
+    clinical: viser.GuiMarkdownHandle  # the measurements in clinical words
     plot: viser.GuiImageHandle
+    lesion_start: viser.GuiSliderHandle  # lesion ends (mm along the vessel), movable
+    lesion_end: viser.GuiSliderHandle
+    markdown: viser.GuiMarkdownHandle  # engineering figures, in a folded folder
 
 
 @dataclass(frozen=True)
@@ -211,15 +215,34 @@ class Panels:
 
     def clear_results(self) -> None:
         """No reconstruction, not calibrated, no chart."""
-        self.results.markdown.content = NO_RECONSTRUCTION_TEXT
+        r = self.results
+        r.clinical.content = NO_RECONSTRUCTION_TEXT
+        r.markdown.content = NO_RECONSTRUCTION_TEXT
         self.calibrate.markdown.content = NOT_CALIBRATED_TEXT
-        self.results.plot.visible = False
+        for h in (r.plot, r.lesion_start, r.lesion_end):
+            h.visible = False
 
-    def show_reconstruction(self, rec: Reconstruction) -> None:
-        """The results tables and the diameter chart."""
-        self.results.markdown.content = results_markdown(rec)
-        self.results.plot.image = profile_plot(rec)
-        self.results.plot.visible = True
+    def show_reconstruction(self, rec: Reconstruction,
+                            foreshortening_pct: dict[str, float] | None = None) -> None:
+        """The clinical table, the diameter chart with its lesion sliders, the details."""
+        r = self.results
+        r.markdown.content = results_markdown(rec)
+        s = np.asarray(rec.profile.s_mm, dtype=float)
+        m = rec.measurements
+        with self.refreshing.during():
+            for h, value in ((r.lesion_start, m.lesion_start_s_mm),
+                             (r.lesion_end, m.lesion_end_s_mm)):
+                h.min, h.max, h.step = float(s[0]), float(s[-1]), 0.1
+                h.value = float(np.round(value, 1))
+                h.visible = True
+        self.show_lesion(rec, None, foreshortening_pct)
+        r.plot.visible = True
+
+    def show_lesion(self, rec: Reconstruction, lesion: dict[str, float] | None,
+                    foreshortening_pct: dict[str, float] | None = None) -> None:
+        """The clinical table and the chart for the automatic or hand-set lesion ends."""
+        self.results.clinical.content = clinical_markdown(rec, lesion, foreshortening_pct)
+        self.results.plot.image = profile_plot(rec, width=420, height=300, lesion=lesion)
 
 
 def build_panels(gui: viser.GuiApi, app: ViewerApp) -> Panels:
@@ -440,11 +463,25 @@ def _results_panel(gui: viser.GuiApi, app: ViewerApp, refreshing: Refreshing) ->
                 return
             app.guard("Show", event.client, lambda: app.set_layout(str(layout.value)))
 
-        markdown = gui.add_markdown("")
+        clinical = gui.add_markdown("")
         plot = gui.add_image(np.full((8, 8, 3), 255, np.uint8),
                              label="Diameter along the vessel", visible=False)
+        lesion_start = gui.add_slider("Lesion start (mm)", 0.0, 1.0, 0.1, 0.0, visible=False)
+        lesion_end = gui.add_slider("Lesion end (mm)", 0.0, 1.0, 0.1, 1.0, visible=False)
+
+        def lesion_moved(event: viser.GuiEvent) -> None:
+            if refreshing.active:
+                return
+            app.guard("Lesion", event.client,
+                      lambda: app.set_lesion(lesion_start.value, lesion_end.value))
+
+        lesion_start.on_update(lesion_moved)
+        lesion_end.on_update(lesion_moved)
+        with gui.add_folder("Details (engineering)", expand_by_default=False):
+            markdown = gui.add_markdown("")
     return ResultsPanel(reconstruct=reconstruct, progress=progress, layout=layout,
-                        markdown=markdown, plot=plot)
+                        clinical=clinical, plot=plot, lesion_start=lesion_start,
+                        lesion_end=lesion_end, markdown=markdown)
 
 
 def _export_panel(gui: viser.GuiApi, app: ViewerApp) -> ExportPanel:

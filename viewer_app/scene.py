@@ -55,6 +55,8 @@ __all__ = [
     "draw_reconstruction",
     "diameter_colors",
     "lesion_points",
+    "automatic_marks",
+    "draw_lesion_marks",
     "ModelNodes",
     "LAYOUTS",
     "Framing",
@@ -303,25 +305,58 @@ def diameter_colors(d_mm: FloatArray, ref_mm: float) -> NDArray[np.uint8]:
 
 @dataclass(frozen=True)
 class ModelNodes:
-    """The ``/model`` frame and where it sits (scene units)."""
+    """The ``/model`` frame, where it sits (scene units) and how world mm map to it."""
 
     root: viser.FrameHandle
     position: FloatArray  # (3,) centre of the model
+    T_scene_from_world: FloatArray  # (4, 4) similarity: world mm -> scene units
 
 
-def lesion_points(rec: Reconstruction) -> dict[str, FloatArray]:
-    """World points (3,) of the MLD and, when a lesion was found, its two ends."""
+def draw_lesion_marks(scene: viser.SceneApi, views: Mapping[str, View], rec: Reconstruction,
+                      model: ModelNodes, marks_s_mm: Mapping[str, float],
+                      mld_mm: float) -> None:
+    """MLD and lesion ends on both angiograms (projected) and the MLD on the model."""
+    pts = lesion_points(rec, marks_s_mm)
+    names = list(pts)
+    P = np.array([pts[n] for n in names])
+    for key, geom in (("a", rec.view_a), ("b", rec.view_b)):
+        v, root = views[key], overlay_name(key)
+        scene.remove_by_name(f"{root}/lesion_labels")
+        local = v.local_from_px(geom.project(P), z=OVERLAY_Z * 1.8)
+        scene.add_point_cloud(f"{root}/lesion", local.astype(np.float32),
+                              np.array([MARKER_COLORS[n] for n in names], np.uint8),
+                              point_size=0.018, point_shape="diamond", point_shading="flat")
+        # Only the MLD is named: the lesion ends (blue) sit a few mm from it and their
+        # names would cover the vessel.
+        p = local[names.index("MLD")]
+        scene.add_label(f"{root}/lesion_labels/mld", "MLD", font_screen_scale=0.8,
+                        position=tuple(p + np.array([-0.015, 0.0, 0.0])),
+                        anchor="center-right")
+    T = model.T_scene_from_world
+    mld_scene = T[:3, :3] @ pts["MLD"] + T[:3, 3]
+    scene.add_icosphere("/model/mld", radius=0.02, color=MARKER_COLORS["MLD"],
+                        position=tuple(mld_scene), cast_shadow=False, receive_shadow=False)
+    scene.add_label("/model/mld_label", f"MLD {mld_mm:.2f} mm",
+                    position=tuple(mld_scene + np.array([0.03, 0.0, -0.03])),
+                    anchor="center-left")
+
+
+def lesion_points(rec: Reconstruction, marks_s_mm: Mapping[str, float]) -> dict[str, FloatArray]:
+    """World points (3,) at arc lengths ``marks_s_mm`` ({"MLD": s, "lesion start": s, ...})
+    along the 3D centerline."""
     X = np.asarray(rec.centerline_3d.X_world, dtype=float)
     s = np.asarray(rec.centerline_3d.s_mm, dtype=float)
+    return {n: np.array([np.interp(v, s, X[:, k]) for k in range(3)])
+            for n, v in marks_s_mm.items()}
+
+
+def automatic_marks(rec: Reconstruction) -> dict[str, float]:
+    """Arc lengths (mm) of the MLD and, when a lesion was found, of its two ends."""
     m = rec.measurements
-
-    def at(s_mm: float) -> FloatArray:
-        return np.array([np.interp(s_mm, s, X[:, k]) for k in range(3)])
-
-    out = {"MLD": at(m.mld_s_mm)}
+    out = {"MLD": float(m.mld_s_mm)}
     if m.has_lesion:
-        out["lesion start"] = at(m.lesion_start_s_mm)
-        out["lesion end"] = at(m.lesion_end_s_mm)
+        out["lesion start"] = float(m.lesion_start_s_mm)
+        out["lesion end"] = float(m.lesion_end_s_mm)
     return out
 
 
@@ -337,24 +372,13 @@ def draw_reconstruction(
 
     X = np.asarray(rec.centerline_3d.X_world, dtype=float)
     s = np.asarray(rec.centerline_3d.s_mm, dtype=float)
-    marks3d = lesion_points(rec)
-    names = list(marks3d)
-    P = np.array([marks3d[n] for n in names])
     for key, cl, geom in (("a", rec.centerline_a, rec.view_a), ("b", rec.centerline_b,
                                                                 rec.view_b)):
-        v, root = views[key], overlay_name(key)
+        v = views[key]
         v.nodes.trace.points = polyline_segments(
             v.local_from_px(cl.points_px, z=OVERLAY_Z * 0.8)).astype(np.float32)
         v.nodes.backproj.points = polyline_segments(
             v.local_from_px(geom.project(X), z=OVERLAY_Z * 1.2)).astype(np.float32)
-        local = v.local_from_px(geom.project(P), z=OVERLAY_Z * 1.8)
-        scene.add_point_cloud(f"{root}/lesion", local.astype(np.float32),
-                              np.array([MARKER_COLORS[n] for n in names], np.uint8),
-                              point_size=0.02, point_shape="diamond", point_shading="flat")
-        for i, (n, p) in enumerate(zip(names, local, strict=True)):
-            scene.add_label(f"{root}/lesion_labels/l{i}", n, font_screen_scale=0.8,
-                            position=tuple(p + np.array([-0.01, 0.01, 0.0])),
-                            anchor="top-right")
     draw_flagged(scene, views, rec)
     # The model in view A's frame (x = columns, y = rows, z = away from the source),
     # so the first look at it matches view A; scaled to MODEL_SIZE, above the images.
@@ -372,6 +396,9 @@ def draw_reconstruction(
     T = np.eye(4)
     T[:3, :3] = scale * R
     T[:3, 3] = model_position - scale * (lo + hi) / 2
+    # Its nearest point on the images' plane, the rest behind it: perspective then
+    # makes no part larger than the framing allows (nothing cut off at the top).
+    T[2, 3] = model_position[2] - scale * lo[2]
     mesh.apply_transform(T)
     mesh.visual.vertex_colors = np.column_stack([colors, np.full(len(colors), 255, np.uint8)])
     root = scene.add_frame("/model", show_axes=False)
@@ -379,19 +406,16 @@ def draw_reconstruction(
     X_scene = (X @ R.T) * scale + T[:3, 3]
     scene.add_line_segments("/model/centerline", polyline_segments(X_scene).astype(
         np.float32), (40, 40, 40), thickness=1.5, thickness_units="screen")
-    mld_scene = (marks3d["MLD"] @ R.T) * scale + T[:3, 3]
-    scene.add_icosphere("/model/mld", radius=0.02, color=MARKER_COLORS["MLD"],
-                        position=tuple(mld_scene), cast_shadow=False, receive_shadow=False)
     m = rec.measurements
-    scene.add_label("/model/mld_label", f"MLD {m.mld_mm:.2f} mm",
-                    position=tuple(mld_scene + np.array([0.03, 0.0, -0.03])),
-                    anchor="center-left")
     scene.add_label("/model/title", f"3D model, {m.segment_length_mm:.1f} mm, coloured by "
                     "diameter (green = reference, red = half of it); drag to rotate",
                     position=(-views["a"].render_w - IMAGE_GAP / 2,
                               model_position[1] - MODEL_SIZE / 2, 0.0),
                     anchor="top-left")
-    return ModelNodes(root=root, position=model_position)
+    centre = model_position + np.array([0.0, 0.0, scale * (hi[2] - lo[2]) / 2])
+    model = ModelNodes(root=root, position=centre, T_scene_from_world=T)
+    draw_lesion_marks(scene, views, rec, model, automatic_marks(rec), m.mld_mm)
+    return model
 
 
 def draw_flagged(scene: viser.SceneApi, views: Mapping[str, View], rec: Reconstruction
@@ -423,7 +447,7 @@ def draw_flagged(scene: viser.SceneApi, views: Mapping[str, View], rec: Reconstr
     return len(stretches)
 
 
-CAMERA_FOV_RAD = float(np.radians(30.0))  # narrow: the image planes look nearly flat
+CAMERA_FOV_RAD = float(np.radians(75.0))  # viser's default vertical field of view
 STRAIGHT = np.array([0.0, 0.0, 1.0])  # camera looks along +z, rows down the screen
 ROTATED_DEG = 4.0  # a camera turned further than this from STRAIGHT was rotated by the user
 
@@ -458,8 +482,8 @@ def layout_framing(layout: str, views: Mapping[str, View],
         return Framing(True, False, images_centre, half_w,
                        half_h + 0.04, True)
     if layout == "3D model":
-        return Framing(False, True, np.asarray(model_position, float), MODEL_SIZE / 2 * 1.1,
-                       MODEL_SIZE / 2 * 1.1, False)
+        return Framing(False, True, np.asarray(model_position, float), MODEL_SIZE * 0.75,
+                       MODEL_SIZE * 0.75, False)
     top = float(model_position[1]) - MODEL_SIZE / 2
     centre = np.array([images_centre[0], (top + half_h) / 2, 0.0])
     return Framing(True, True, centre, half_w, (half_h - top) / 2 + 0.04, True)
@@ -480,12 +504,12 @@ def apply_framing(client: viser.ClientHandle, fr: Framing) -> None:
         d = np.asarray(cam.look_at, float) - np.asarray(cam.position, float)
         if np.linalg.norm(d) > 1e-9:
             direction = d / np.linalg.norm(d)
-    dist = camera_distance(fr, float(getattr(cam, "aspect", 1.0) or 1.0))
+    dist = camera_distance(fr, float(cam.aspect or 1.0), float(cam.fov or CAMERA_FOV_RAD))
     with client.atomic():
-        cam.fov = CAMERA_FOV_RAD
         cam.up_direction = (0.0, -1.0, 0.0)
-        cam.look_at = tuple(fr.centre)
+        # viser moves look_at along with a new position: position first, then look_at.
         cam.position = tuple(fr.centre - direction * dist)
+        cam.look_at = tuple(fr.centre)
 
 
 def set_visibility(views: Mapping[str, View], model: viser.FrameHandle | None,

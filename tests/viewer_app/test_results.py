@@ -85,7 +85,8 @@ def test_calibration_table() -> None:
     res = SimpleNamespace(
         rotvec=np.radians([0.0, 0.0, 1.5]), t_mm=np.array([3.0, 4.0, 0.0]),
         error_before_px=2.744, error_after_px=0.261, error_before_mm=1.07, error_after_mm=0.1,
-        iterations=5, elapsed_ms=7.4, warnings=("underdetermined",),
+        iterations=5, elapsed_ms=7.4,
+        warnings=("ill-conditioned", "underdetermined: 3 features constrain fewer than the 5"),
     )
     assert calibration_markdown(res) == "\n".join([
         "| | before | after |",
@@ -95,7 +96,10 @@ def test_calibration_table() -> None:
         "",
         "Pose correction of B: **1.50°** rotation, **5.00 mm** translation "
         "(3.00, 4.00, 0.00 mm); 5 iterations, 7 ms.",
-        "- ⚠ underdetermined",
+        "- ⚠ ill-conditioned",
+        "- ℹ 3 correspondences (the 2 segment ends + 1 landmark pair(s)): with 5 or more "
+        "the images alone fix view B's pose; with fewer the header's expected accuracy fills "
+        "in. Add 2 landmark pair(s) (branch points) to firm it up.",
     ])
     assert "Not calibrated" in NOT_CALIBRATED_TEXT and NO_RECONSTRUCTION_TEXT
 
