@@ -543,6 +543,7 @@ class ViewerApp:
                 self.reconstruction = rec
                 self.calibration = rec.calibration
                 self.state.set_calibrated_b(rec.view_b)
+                self.state.select(None)  # no guide line across the results
                 self.panels.show_calibration(rec.calibration)
                 self._show_reconstruction(rec)
                 self._redraw_marks()

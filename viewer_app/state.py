@@ -359,6 +359,10 @@ class MarkState:
         pending = [m for m in self.marks if m.kind == "feature"
                    and self.partner(m) is None]
         text = f"Next click in **A**: {nxt['a']} · in **B**: {nxt['b']}."
+        guide = self.mark_by_id(self._guide_id)
+        if guide is not None and self.partner(guide) is None:
+            text += (f" The magenta line in {_other(guide.view).upper()} shows where "
+                     f"{self.label(guide)} lies there.")
         if pending:
             p = pending[-1]
             text += (f" Landmark {p.group + 1} waits for its partner in "

@@ -114,6 +114,20 @@ def test_reconstruct_then_export(app: ViewerApp) -> None:
     table = app.panels.results.markdown.content
     assert table.startswith("| measurement | value |") and "| Table 3 |" in table
     assert app.panels.results.plot.visible
+    m = rec.measurements
+    clinical = app.panels.results.clinical.content
+    assert f"| Minimal lumen diameter | **{m.mld_mm:.2f} mm** |" in clinical
+    assert f"| % diameter stenosis | **{m.diameter_stenosis_pct:.0f} %** |" in clinical
+    assert "Table 3" not in clinical and "ms" not in clinical  # engineering folded away
+    # Moving the lesion ends: the measurements, chart and marks follow.
+    start, end = m.lesion_start_s_mm - 3.0, m.lesion_end_s_mm + 3.0
+    lesion = app.set_lesion(start, end)
+    assert lesion["lesion_length_mm"] == pytest.approx(end - start)
+    assert lesion["mld_mm"] == pytest.approx(
+        float(np.min(rec.profile.diameter_smooth_mm[(rec.profile.s_mm >= start)
+                                                    & (rec.profile.s_mm <= end)])))
+    assert "set by hand" in app.panels.results.clinical.content
+    assert f"{end - start:.1f} mm" in app.panels.results.clinical.content
 
     stl = app.export("stl")
     mesh = trimesh.load(io.BytesIO(stl), file_type="stl")

@@ -353,7 +353,7 @@ def test_guided_session_from_an_empty_page_to_a_mesh(
             assert box[0] >= 0 and box[1] >= 0 and box[2] <= canvas[0] and box[3] <= canvas[1], (
                 box, canvas)
             b.shot("guided_9_after_reload.png")
-            b.page.get_by_text("Minimal lumen diameter").scroll_into_view_if_needed()
+            b.page.get_by_text("Lesion end (mm)").scroll_into_view_if_needed()
             b.shot("guided_10_results_panel.png")
 
             with b.page.expect_download(timeout=30_000) as info:
