@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import logging
+import re
 import tempfile
 import threading
 import time
@@ -24,7 +25,7 @@ import numpy as np
 import viser
 from numpy.typing import NDArray
 
-from recon.errors import OutputError
+from recon.errors import LoadError, OutputError
 from recon.io import (
     MESH_FORMATS,
     demo_paths,
@@ -33,6 +34,7 @@ from recon.io import (
     outputs_as_bytes,
     save_seeds,
 )
+from recon.io.overrides import header_replacements
 from recon.seeds import Seeds
 from recon.types import Angiogram
 from viewer_app import scene
@@ -47,6 +49,7 @@ from viewer_app.state import (
 
 if TYPE_CHECKING:
     from recon.calibration import CalibrationResult
+    from recon.io.overrides import GeometryOverrides
     from recon.pipeline import Reconstruction
 
 __all__ = ["ViewerApp", "run_viewer", "EXPORT_KINDS"]
@@ -72,6 +75,8 @@ class ViewerApp:
     frame_a, frame_b : 0-based frames of cine runs (None: the loader's choice).
     autosave_path : where marks are autosaved; None:
         ``~/.cache/coronary3d/autosave/<pair>.json``.
+    overrides_a, overrides_b : geometry values for file A / B (``coronary3d view
+        --geometry-a`` ...); a header value they replace is named in a warning.
 
     Raises
     ------
@@ -89,6 +94,8 @@ class ViewerApp:
         frame_a: int | None = None,
         frame_b: int | None = None,
         autosave_path: str | Path | None = None,
+        overrides_a: GeometryOverrides | None = None,
+        overrides_b: GeometryOverrides | None = None,
     ) -> None:
         if (path_a is None) != (path_b is None):
             raise ValueError("give both angiograms (A and B) or none for the demo case")
@@ -113,9 +120,10 @@ class ViewerApp:
         self._framed_aspect: dict[int, float] = {}  # client id -> canvas aspect when framed
         self._framed_at: dict[int, float] = {}  # client id -> time.monotonic() when framed
 
-        angio_a = load_angiogram(path_a, frame=frame_a)
-        angio_b = load_angiogram(path_b, frame=frame_b)
+        angio_a = load_angiogram(path_a, frame=frame_a, overrides=overrides_a)
+        angio_b = load_angiogram(path_b, frame=frame_b, overrides=overrides_b)
         seeds = load_seeds(seeds_path) if seeds_path is not None else None
+        self.pending_pair: tuple[str, str] | None = None  # a pair waiting for its geometry
 
         self.server = viser.ViserServer(host=host, port=port, verbose=False)
         self._setup_page()
@@ -259,6 +267,9 @@ class ViewerApp:
             for v in self.views.values():
                 scene.add_view_nodes(self.server.scene, v, self._make_click_callback(v.key))
             self.panels.show_pair(self.views)
+            self.panels.show_geometry(
+                {k: v.angio.geometry.to_dict() for k, v in self.views.items()},
+                {k: v.display_name for k, v in self.views.items()})
             self._clear_results()
             self._redraw_marks()
         self.set_layout("Angiograms")
@@ -279,20 +290,75 @@ class ViewerApp:
         frame_a: int | None = None,
         frame_b: int | None = None,
         client: object | None = None,
+        overrides_a: GeometryOverrides | None = None,
+        overrides_b: GeometryOverrides | None = None,
     ) -> bool:
-        """Open two other files; a bad file gives an error notification and returns False."""
+        """Open two other files; a bad file gives an error notification and returns False.
+        A file that lacks SID, SOD or pixel spacing fills the Geometry folder with what its
+        header has, to be completed there ("Open with this geometry")."""
 
         def run() -> bool:
-            angio_a = load_angiogram(path_a, frame=frame_a)
-            angio_b = load_angiogram(path_b, frame=frame_b)
+            try:
+                angio_a = load_angiogram(path_a, frame=frame_a, overrides=overrides_a)
+                angio_b = load_angiogram(path_b, frame=frame_b, overrides=overrides_b)
+            except LoadError as exc:
+                if "missing" in str(exc) and self._offer_geometry(path_a, path_b, client):
+                    raise LoadError(re.sub(r"give --[\w-]+ or a geometry JSON",
+                                           "enter it under Geometry", str(exc))) from None
+                raise
             with self._lock:
                 self._autosave()
+            self.pending_pair = None
             self._set_pair(angio_a, angio_b, Path(path_a).name, Path(path_b).name, None, None)
             self.notify("Opened", f"A: {Path(path_a).name}, B: {Path(path_b).name}", "success",
                         client)
             return True
 
         return bool(self.guard("Open", client, run))
+
+    def _offer_geometry(self, path_a: str, path_b: str, client: object | None) -> bool:
+        """Fill the Geometry folder from the two files' headers (missing values empty);
+        False when a file cannot be read at all."""
+        from recon.io.describe import describe_file
+
+        headers = {}
+        for key, path in (("a", path_a), ("b", path_b)):
+            try:
+                headers[key] = describe_file(path)["geometry"]
+            except LoadError:
+                return False  # unreadable: the error notification says why
+        self.pending_pair = (path_a, path_b)
+        self.panels.show_geometry(headers, {k: Path(p).name for k, p in
+                                            (("a", path_a), ("b", path_b))})
+        self.notify("Geometry needed", "enter the missing SID, SOD or pixel spacing under "
+                    "Geometry, then press 'Open with this geometry'", "warning", client)
+        return True
+
+    def apply_geometry(self, entries: dict[str, dict[str, str]],
+                       client: object | None = None) -> bool:
+        """Open the pending pair (or reopen the current one) with typed geometry values
+        (view -> key -> text, "" keeps the header's); a replaced header value is named in
+        a warning."""
+        from recon.io.describe import describe_file
+        from recon.io.overrides import overrides_from_entries
+
+        def run() -> bool:
+            pair = self.pending_pair or (self.views["a"].angio.path,
+                                         self.views["b"].angio.path)
+            overrides, warnings = {}, []
+            for key, path in zip(("a", "b"), pair, strict=True):
+                header = describe_file(path)["geometry"]
+                ov, replaced = overrides_from_entries(
+                    entries[key], header, source=f"Geometry {key.upper()} ({Path(path).name})")
+                overrides[key] = ov
+                warnings += [f"{key.upper()} {Path(path).name}: {r}" for r in replaced]
+            ok = self.open_pair(pair[0], pair[1], client=client, overrides_a=overrides["a"],
+                                overrides_b=overrides["b"])
+            for w in warnings if ok else ():
+                self.notify("Header value replaced", w, "warning", client)
+            return ok
+
+        return bool(self.guard("Geometry", client, run))
 
     def open_upload(self, view: str, filename: str, content: bytes,
                     client: object | None = None) -> bool:
@@ -640,6 +706,8 @@ def run_viewer(
     on_ready: Callable[[str], None] | None = None,
     autosave_path: str | Path | None = None,
     stop_event: threading.Event | None = None,
+    overrides_a: GeometryOverrides | None = None,
+    overrides_b: GeometryOverrides | None = None,
 ) -> None:
     """Serve the viewer until interrupted (Ctrl-C) or ``stop_event`` is set.
 
@@ -648,7 +716,12 @@ def run_viewer(
     SeedsError (one line) when the initial files cannot be used.
     """
     app = ViewerApp(path_a, path_b, seeds_path, host=host, port=port, frame_a=frame_a,
-                    frame_b=frame_b, autosave_path=autosave_path)
+                    frame_b=frame_b, autosave_path=autosave_path, overrides_a=overrides_a,
+                    overrides_b=overrides_b)
+    for v in app.views.values():  # a header value replaced by a flag is said, not silent
+        for note in header_replacements(v.angio.geometry_notes):
+            log.warning("%s: %s", v.display_name, note)
+            app.notify("Header value replaced", f"{v.key.upper()}: {note}", "warning")
     if on_ready is not None:
         on_ready(app.url)
     stop = stop_event or threading.Event()

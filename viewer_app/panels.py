@@ -111,6 +111,19 @@ class MarksPanel:
 
 
 @dataclass(frozen=True)
+class GeometryPanel:
+    """SID, SOD and pixel spacing per file, prefilled from the header, for files that
+    lack them; "Open with this geometry" (re)opens the pair with the typed values."""
+
+    note: viser.GuiMarkdownHandle
+    fields: dict[str, dict[str, viser.GuiTextHandle]]  # view -> key -> text field
+    apply: viser.GuiButtonHandle
+
+    def entries(self) -> dict[str, dict[str, str]]:
+        return {v: {k: str(h.value) for k, h in f.items()} for v, f in self.fields.items()}
+
+
+@dataclass(frozen=True)
 class SeedsPanel:
     """Loading and saving the marks as a seeds.json."""
 
@@ -154,6 +167,7 @@ class Panels:
     """Every panel of the control panel, top to bottom, and the ways the app fills them."""
 
     case: CasePanel
+    geometry: GeometryPanel
     marks: MarksPanel
     seeds: SeedsPanel
     calibrate: CalibratePanel
@@ -181,6 +195,23 @@ class Panels:
                 else:
                     fr.visible = False
             self.show_info(views)
+
+    def show_geometry(self, headers: Mapping[str, Mapping[str, object]],
+                      names: Mapping[str, str]) -> None:
+        """Prefill the Geometry folder: each file's values (None: missing, left empty)."""
+        missing = []
+        for view, fields in self.geometry.fields.items():
+            for key, h in fields.items():
+                value = headers[view].get(key)
+                if value is None:
+                    missing.append(f"{view.upper()} {GEOMETRY_WORDS[key]}")
+                    h.value = ""
+                else:
+                    h.value = f"{float(np.asarray(value, float).reshape(-1)[0]):g}"
+        text = (f"A: {names['a']} · B: {names['b']}. Empty fields are missing from the file"
+                f"{': ' + ', '.join(missing) if missing else ''}. A value that differs from "
+                "the header's replaces it, with a warning.")
+        self.geometry.note.content = text
 
     def show_info(self, views: Mapping[str, View]) -> None:
         a, b = views["a"], views["b"]
@@ -252,10 +283,11 @@ def build_panels(gui: viser.GuiApi, app: ViewerApp) -> Panels:
     results = _results_panel(gui, app, refreshing)
     calibrate = _calibrate_panel(gui, app)
     case = _case_panel(gui, app, refreshing)
+    geometry = _geometry_panel(gui, app)
     seeds = _seeds_panel(gui, app)
     export = _export_panel(gui, app)
-    return Panels(case=case, marks=marks, seeds=seeds, calibrate=calibrate, results=results,
-                  export=export, refreshing=refreshing)
+    return Panels(case=case, geometry=geometry, marks=marks, seeds=seeds,
+                  calibrate=calibrate, results=results, export=export, refreshing=refreshing)
 
 
 def _case_panel(gui: viser.GuiApi, app: ViewerApp, refreshing: Refreshing) -> CasePanel:
@@ -396,6 +428,25 @@ def _marks_panel(gui: viser.GuiApi, app: ViewerApp, refreshing: Refreshing) -> M
         summary = gui.add_markdown("")
     return MarksPanel(guide=guide, mode=mode, segment=segment, new_segment=new_segment,
                       select=select, undo=undo, clear=clear, summary=summary)
+
+
+GEOMETRY_WORDS = {"sid_mm": "SID (mm)", "sod_mm": "SOD (mm)",
+                  "pixel_spacing_mm": "pixel spacing (mm)"}
+
+
+def _geometry_panel(gui: viser.GuiApi, app: ViewerApp) -> GeometryPanel:
+    with gui.add_folder("Geometry", expand_by_default=False):
+        note = gui.add_markdown("")
+        fields = {view: {key: gui.add_text(f"{view.upper()} {word}", "")
+                         for key, word in GEOMETRY_WORDS.items()} for view in VIEW_KEYS}
+        apply = gui.add_button("Open with this geometry", icon=viser.Icon.CHECK)
+    panel = GeometryPanel(note=note, fields=fields, apply=apply)
+
+    @apply.on_click
+    def _(event: viser.GuiEvent) -> None:
+        app.apply_geometry(panel.entries(), client=event.client)
+
+    return panel
 
 
 def _seeds_panel(gui: viser.GuiApi, app: ViewerApp) -> SeedsPanel:

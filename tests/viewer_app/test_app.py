@@ -232,11 +232,32 @@ def test_cine_frame_slider_and_missing_geometry(tmp_path: Path) -> None:
         slider.value = 1  # as if the user dragged it
         assert app.views["a"].angio.frame_index == 1
         assert not np.array_equal(app.views["a"].nodes.image.image, before)
-        # A real clinical cine without SID/SOD/spacing: an error notification, the app lives on.
+        # A real clinical cine without SID/SOD/spacing: an error notification, the app lives on,
+        # and the Geometry folder asks for the three values (IM8's prefilled from its header).
         assert app.open_pair(str(data / "rca-cine-ecg.dcm"), str(data / "IM8.dcm")) is False
         level, _, body = app.notifications[-1]
         assert level == "error" and "DistanceSourceToDetector" in body
+        assert "enter it under Geometry" in body and "--sid-mm" not in body
         assert app.views["a"].angio.path.endswith("IM7.dcm")
+        entries = app.panels.geometry.entries()
+        assert entries["a"] == {"sid_mm": "", "sod_mm": "", "pixel_spacing_mm": ""}
+        im8 = app.views["b"].angio.geometry
+        assert float(entries["b"]["sid_mm"]) == pytest.approx(im8.sid_mm)
+        entries["a"] = {"sid_mm": "1000", "sod_mm": "750", "pixel_spacing_mm": "0.3"}
+        n_notes = len(app.notifications)
+        assert app.apply_geometry(entries)
+        a, b = app.views["a"].angio, app.views["b"].angio
+        assert a.path.endswith("rca-cine-ecg.dcm") and a.geometry.sid_mm == 1000.0
+        assert a.geometry.sod_mm == 750.0 and a.geometry.pixel_spacing_mm == (0.3, 0.3)
+        assert b.geometry.sid_mm == pytest.approx(im8.sid_mm)  # IM8's own header, untouched
+        assert not [n for n in app.notifications[n_notes:] if n[0] == "warning"]
+        # A typed value that differs from a header's replaces it, and says so.
+        entries = app.panels.geometry.entries()
+        entries["b"]["sid_mm"] = f"{im8.sid_mm + 100:g}"
+        assert app.apply_geometry(entries)
+        assert app.views["b"].angio.geometry.sid_mm == pytest.approx(im8.sid_mm + 100)
+        level, title, body = app.notifications[-1]
+        assert level == "warning" and "replaces the header's" in body and "IM8" in body
     finally:
         app.stop()
 
