@@ -6,7 +6,7 @@ the command line (`coronary3d reconstruct`) and the viewer both call it.
     trace both views -> calibrate view B on the clicked features (PALM, eq. 5)
     -> match (CBOCD + DP, eqs. 6-10)
     -> triangulate + smooth (eqs. 2-3) -> elliptic sections + surface
-       (sec. 3.5, eq. 11) -> 3D measurements
+       (sec. 3.5, eq. 11) -> 3D measurements -> foreshortening and the best next view
 
 Self-calibration (off by default, ``ReconstructionOptions.self_calibration``)
 adds, after the first matching, a recalibration with the deviation pairs
@@ -33,6 +33,7 @@ from recon.geometry import MIN_VIEW_SEPARATION_DEG, ViewGeometry, view_separatio
 from recon.intensity import resolve_mapping
 from recon.matching import match_centerlines
 from recon.measure import LumenProfile, Measurements, lumen_profile, measure_lumen
+from recon.optimal_view import OptimalView, optimal_view
 from recon.seeds import Seeds
 from recon.surface import SurfaceResult, build_surface
 from recon.triangulation import build_centerline_3d, table3_metrics
@@ -111,6 +112,7 @@ class Reconstruction:
     # about the inputs and the stretches that failed it
     consistency: ConsistencyResult | None = None
     warnings: tuple[str, ...] = ()
+    optimal_view: OptimalView | None = None  # foreshortening map and the best next view
 
     def report(self) -> dict:
         """JSON-ready report: inputs, geometry, calibration, matching, measurements, timings."""
@@ -174,6 +176,8 @@ class Reconstruction:
                 "b": _intensity_report(self.centerline_b),
             },
             "consistency": self.consistency.to_dict() if self.consistency is not None else None,
+            "optimal_view": (self.optimal_view.to_dict() if self.optimal_view is not None
+                             else None),
             "warnings": list(self.warnings),
             "timings_ms": self.timings_ms,
         }
@@ -317,6 +321,11 @@ def reconstruct_pair(
     profile = lumen_profile(cl3d.s_mm, surface.sections.area_mm2)
     measurements = measure_lumen(profile)
     lap("measure")
+
+    # 8. Foreshortening in both views and the best next view (recon.optimal_view).
+    radius_mm = np.interp(cl3d.s_mm, profile.s_mm, profile.diameter_smooth_mm) / 2.0
+    best_view = optimal_view(cl3d.X_world, radius_mm, view_a, {"a": view_a, "b": cal.view_b})
+    lap("optimal_view")
     timings["total"] = round(sum(timings.values()), 2)
     _notify(progress, "done", 1.0)
 
@@ -341,6 +350,7 @@ def reconstruct_pair(
         timings_ms=timings,
         consistency=consistency,
         warnings=tuple(warnings),
+        optimal_view=best_view,
     )
 
 

@@ -253,8 +253,7 @@ class Panels:
         for h in (r.plot, r.lesion_start, r.lesion_end):
             h.visible = False
 
-    def show_reconstruction(self, rec: Reconstruction,
-                            foreshortening_pct: dict[str, float] | None = None) -> None:
+    def show_reconstruction(self, rec: Reconstruction) -> None:
         """The clinical table, the diameter chart with its lesion sliders, the details."""
         r = self.results
         r.markdown.content = results_markdown(rec)
@@ -266,13 +265,12 @@ class Panels:
                 h.min, h.max, h.step = float(s[0]), float(s[-1]), 0.1
                 h.value = float(np.round(value, 1))
                 h.visible = True
-        self.show_lesion(rec, None, foreshortening_pct)
+        self.show_lesion(rec, None)
         r.plot.visible = True
 
-    def show_lesion(self, rec: Reconstruction, lesion: dict[str, float] | None,
-                    foreshortening_pct: dict[str, float] | None = None) -> None:
+    def show_lesion(self, rec: Reconstruction, lesion: dict[str, float] | None) -> None:
         """The clinical table and the chart for the automatic or hand-set lesion ends."""
-        self.results.clinical.content = clinical_markdown(rec, lesion, foreshortening_pct)
+        self.results.clinical.content = clinical_markdown(rec, lesion)
         self.results.plot.image = profile_plot(rec, width=420, height=300, lesion=lesion)
 
 

@@ -185,13 +185,12 @@ def lesion_measurements(profile: object, start_mm: float, end_mm: float) -> dict
     }
 
 
-def clinical_markdown(rec: Reconstruction, lesion: dict[str, float] | None = None,
-                      foreshortening_pct: dict[str, float] | None = None) -> str:
-    """The results a clinician reads, with labels and units.
+def clinical_markdown(rec: Reconstruction, lesion: dict[str, float] | None = None) -> str:
+    """The results a clinician reads, with labels and units; the foreshortening of the
+    segment in both views and the best next view when the reconstruction has them.
 
     ``lesion``: measurements for lesion ends the clinician moved
-    (:func:`lesion_measurements`); None: the automatic analysis. ``foreshortening_pct``:
-    the segment's foreshortening in views "a" and "b" when known.
+    (:func:`lesion_measurements`); None: the automatic analysis.
     """
     m = rec.measurements
     prof = rec.profile
@@ -219,7 +218,11 @@ def clinical_markdown(rec: Reconstruction, lesion: dict[str, float] | None = Non
             f"({v['lesion_start_s_mm']:.1f}–{v['lesion_end_s_mm']:.1f} mm) |",
             f"| MLD position | {v['mld_s_mm']:.1f} mm from the proximal end |",
             f"| Segment length | {m.segment_length_mm:.1f} mm |"]
-    if foreshortening_pct:
-        rows.append(f"| Foreshortening in A / B | {foreshortening_pct['a']:.0f} / "
-                    f"{foreshortening_pct['b']:.0f} % |")
+    best = getattr(rec, "optimal_view", None)
+    if best is not None:
+        fs = best.current_foreshortening_pct
+        rows.append(f"| Foreshortening in A / B | {fs['a']:.0f} / {fs['b']:.0f} % |")
+        rows.append(f"| Best next view | **{angle_text(*best.angles_deg)}** "
+                    f"(foreshortening {best.foreshortening_pct:.1f} %, overlap "
+                    f"{best.overlap_pct:.0f} %) |")
     return "\n".join(rows)
