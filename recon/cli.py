@@ -227,6 +227,12 @@ def build_parser() -> argparse.ArgumentParser:
         help="also write measurements-sr.dcm, a DICOM Structured Report (TID 1500) of the "
         "measurements in the inputs' patient and study (DICOM inputs only)",
     )
+    p.add_argument("--report", action="store_true",
+                   help="also write report.pdf, a one-page report beside report.json (no "
+                   "patient name, ID or date unless --identify)")
+    p.add_argument("--identify", action="store_true",
+                   help="put the patient name, ID and study date from the DICOM headers in "
+                   "report.pdf")
     p.add_argument("--quiet", action="store_true", help="no progress on stderr")
     _add_geometry_options(p, per_file=True)
 
@@ -407,6 +413,12 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
     )
     rec = reconstruct_pair(angio_a, angio_b, seeds, options, progress=progress)
     written = write_outputs(rec, Path(args.out), formats=formats, sr_sources=sr_sources)
+    if args.report:
+        from recon.io.report_pdf import write_report_pdf
+
+        written = [*written, write_report_pdf(Path(args.out) / "report.pdf", rec,
+                                              angio_a.image, angio_b.image,
+                                              identify=args.identify)]
     for line in rec.warnings:  # shown even with --quiet: they qualify the numbers
         print(f"coronary3d: warning: {line}", file=sys.stderr)
     if not args.quiet:
