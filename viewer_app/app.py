@@ -152,14 +152,16 @@ class ViewerApp:
         """A page (re)loaded: frame its camera on the current layout; a user's rotation in
         an angiogram layout turns the page to the 3D model (the angiograms never tilt)."""
         def on_camera(_camera: object) -> None:
-            if self._framing_now or time.monotonic() - self._framed_at.get(
-                    client.client_id, 0.0) < FRAMING_SETTLE_S:
-                return  # our own camera move (the page animates it) is not the user's
+            if self._framing_now:
+                return
             framed = self._framed_aspect.get(client.client_id)
             if framed is not None and abs(float(client.camera.aspect) - framed) > 0.02:
                 self._frame_client(client)  # the canvas changed size (panel docked, resize)
-            elif (self.layout != "3D model"
-                  and scene.camera_rotated_deg(client) > scene.ROTATED_DEG):
+                return
+            if time.monotonic() - self._framed_at.get(client.client_id, 0.0) < FRAMING_SETTLE_S:
+                return  # our own camera move (the page animates it) is not the user's
+            if (self.layout != "3D model"
+                    and scene.camera_rotated_deg(client) > scene.ROTATED_DEG):
                 self.set_layout("3D model" if self.model is not None else "Angiograms",
                                 client=client)
 

@@ -134,8 +134,13 @@ class Browser:
         x, y = self.screen_xy(view, col, row)
         n_marks, n_notes = app.state._next_id, len(app.notifications)
         self.page.mouse.click(x, y)
-        _wait(lambda: app.state._next_id > n_marks or len(app.notifications) > n_notes, 15,
-              f"the click on {view.upper()} ({col:.0f}, {row:.0f}) to reach the server")
+        try:
+            _wait(lambda: app.state._next_id > n_marks or len(app.notifications) > n_notes, 15,
+                  f"the click on {view.upper()} ({col:.0f}, {row:.0f}) at screen "
+                  f"({x:.0f}, {y:.0f}) to reach the server")
+        except AssertionError:
+            self.page.screenshot(path=str(self.out / "click_not_received.png"))
+            raise
         new = [m for m in app.state.marks if m.id >= n_marks]
         return (new[-1] if new else None), app.notifications[n_notes:]
 
