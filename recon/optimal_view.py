@@ -22,7 +22,7 @@ reference view; the best angle minimises ``foreshortening % + overlap %``.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -35,7 +35,7 @@ FloatArray = NDArray[np.float64]
 
 ALPHA_GRID_DEG = np.arange(-90.0, 90.0 + 1e-9, 5.0)  # RAO 90 .. LAO 90
 BETA_GRID_DEG = np.arange(-45.0, 45.0 + 1e-9, 5.0)  # CAU 45 .. CRA 45
-SAMPLE_MM = 1.0  # centerline resampling for the map
+SAMPLE_MM = 2.0  # centerline resampling for the map (finer than the radii sum of a crossing)
 NEIGHBOUR_MM = 6.0  # parts of the segment closer than this along it never "overlap"
 
 
@@ -125,6 +125,17 @@ def overlap_pct(X_world: ArrayLike, radius_mm: ArrayLike, view: ViewGeometry,
     return float(100.0 * hit.mean())
 
 
+def _rig(alpha_deg: FloatArray, beta_deg: FloatArray, sod_mm: float
+         ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """Source S, central ray d and image axes u, v (each (C, 3)) of uncorrected views at
+    the given angles (C,), by the project's C-arm convention (recon.geometry):
+    d = (sin a cos b, -cos a cos b, sin b), u = (cos a, sin a, 0), v = u x d, S = -SOD d."""
+    a, b = np.radians(alpha_deg), np.radians(beta_deg)
+    d = np.stack([np.sin(a) * np.cos(b), -np.cos(a) * np.cos(b), np.sin(b)], axis=-1)
+    u = np.stack([np.cos(a), np.sin(a), np.zeros_like(a)], axis=-1)
+    return -sod_mm * d, d, u, np.cross(u, d)
+
+
 def optimal_view(
     X_world: ArrayLike,
     radius_mm: ArrayLike,
@@ -146,14 +157,37 @@ def optimal_view(
     Xs, rs, _ = _resample(X, radius, SAMPLE_MM)
     alphas = np.asarray(alpha_grid_deg, float)
     betas = np.asarray(beta_grid_deg, float)
-    base = reference.nominal()
-    fs = np.zeros((len(betas), len(alphas)))
-    ov = np.zeros_like(fs)
-    for i, b in enumerate(betas):  # a few hundred views, each vectorised over the points
-        for j, a in enumerate(alphas):
-            view = replace(base, alpha_deg=float(a), beta_deg=float(b))
-            fs[i, j] = foreshortening_pct(Xs, view)
-            ov[i, j] = overlap_pct(Xs, rs, view, others)
+    B, A = np.meshgrid(betas, alphas, indexing="ij")  # (nb, na): row beta, column alpha
+    S, d, u, v = _rig(A.ravel(), B.ravel(), reference.sod_mm)  # (C, 3) each
+    # Foreshortening of every view at once: pieces (N-1, 3), rays (C, N-1, 3).
+    piece = np.diff(Xs, axis=0)
+    ray = ((Xs[:-1] + Xs[1:]) / 2)[None] - S[:, None]
+    ray /= np.linalg.norm(ray, axis=2, keepdims=True)
+    across = piece[None] - np.sum(piece[None] * ray, axis=2, keepdims=True) * ray
+    length = max(float(np.linalg.norm(piece, axis=1).sum()), 1e-12)
+    fs = (100.0 * (1.0 - np.linalg.norm(across, axis=2).sum(axis=1) / length)).reshape(B.shape)
+
+    def plane_mm(P: FloatArray) -> FloatArray:
+        """Points (M, 3) projected in every view, mm at the isocenter: (C, M, 2)."""
+        rel = P[None] - S[:, None]
+        depth = np.einsum("cmk,ck->cm", rel, d)
+        return reference.sod_mm * np.stack([np.einsum("cmk,ck->cm", rel, u),
+                                            np.einsum("cmk,ck->cm", rel, v)],
+                                           axis=-1) / depth[..., None]
+
+    s_pts = np.concatenate([[0.0], np.cumsum(np.linalg.norm(piece, axis=1))])
+    p = plane_mm(Xs)  # (C, N, 2)
+    reach = rs[:, None] + rs[None]
+    far = np.abs(s_pts[:, None] - s_pts[None]) > NEIGHBOUR_MM + 2 * reach
+    dist = np.linalg.norm(p[:, :, None] - p[:, None], axis=3)  # (C, N, N)
+    hit = np.any(far[None] & (dist < reach[None]), axis=2)
+    for Xo, ro in others:
+        Xo, ro, _ = _resample(np.asarray(Xo, float).reshape(-1, 3),
+                              np.asarray(ro, float).reshape(-1), SAMPLE_MM)
+        q = plane_mm(Xo)
+        dq = np.linalg.norm(p[:, :, None] - q[:, None], axis=3)
+        hit |= np.any(dq < (rs[:, None] + ro[None])[None], axis=2)
+    ov = (100.0 * hit.mean(axis=1)).reshape(B.shape)
     score = fs + ov
     i, j = np.unravel_index(int(np.argmin(score)), score.shape)
     now = {k: foreshortening_pct(X, v) for k, v in (current or {}).items()}

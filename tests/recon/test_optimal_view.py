@@ -54,3 +54,16 @@ def test_overlap_of_a_loop_that_crosses_itself_in_projection() -> None:
     assert overlap_pct(loop, r, replace(VIEW, alpha_deg=90.0)) > 50.0
     other = (np.array([[0.0, 0.0, -30.0], [0.0, 0.0, 30.0]]), np.array([1.0, 1.0]))
     assert overlap_pct(loop, r, VIEW, others=(other,)) > 0.0
+
+
+def test_the_map_agrees_with_the_views_it_stands_for() -> None:
+    t = np.linspace(0, 3, 200)
+    X = np.column_stack([30 * np.cos(t), 20 * np.sin(t), 10 * t])  # a helix piece, mm
+    r = np.full(len(t), 1.5)
+    res = optimal_view(X, r, VIEW)
+    for alpha, beta in ((-30.0, 20.0), (45.0, -25.0), (90.0, 0.0)):
+        i, j = list(res.beta_grid_deg).index(beta), list(res.alpha_grid_deg).index(alpha)
+        view = replace(VIEW, alpha_deg=alpha, beta_deg=beta)
+        assert res.foreshortening_map_pct[i, j] == pytest.approx(
+            foreshortening_pct(X, view), abs=0.3)
+        assert res.overlap_map_pct[i, j] == pytest.approx(overlap_pct(X, r, view), abs=3.0)
