@@ -38,6 +38,7 @@ from recon.io.overrides import header_replacements
 from recon.seeds import Seeds
 from recon.types import Angiogram
 from viewer_app import scene
+from viewer_app.camera import PageCameras
 from viewer_app.panels import Panels, build_panels
 from viewer_app.scene import LAYOUTS, ModelNodes, View
 from viewer_app.state import (
@@ -57,7 +58,6 @@ __all__ = ["ViewerApp", "run_viewer", "EXPORT_KINDS"]
 log = logging.getLogger(__name__)
 
 SNAP_MAX_PX = 8.0
-FRAMING_SETTLE_S = 1.5  # camera updates this soon after the app moved the camera are its own
 EXPORT_KINDS = (*MESH_FORMATS, "centerline.csv", "report.json", "seeds.json")
 
 FloatArray = NDArray[np.float64]
@@ -117,8 +117,6 @@ class ViewerApp:
         self.layout = LAYOUTS[0]  # what the page shows: one of scene.LAYOUTS
         self.model: ModelNodes | None = None
         self.lesion: dict[str, float] | None = None  # lesion ends set by hand (mm), if any
-        self._framed_aspect: dict[int, float] = {}  # client id -> canvas aspect when framed
-        self._framed_at: dict[int, float] = {}  # client id -> time.monotonic() when framed
 
         angio_a = load_angiogram(path_a, frame=frame_a, overrides=overrides_a)
         angio_b = load_angiogram(path_b, frame=frame_b, overrides=overrides_b)
@@ -132,70 +130,28 @@ class ViewerApp:
 
     # ================================================================ page
     def _setup_page(self) -> None:
-        """Theme, the straight camera on the angiograms, and per-client camera handling."""
+        """Theme and the pages' cameras (viewer_app.camera)."""
         self.server.scene.set_up_direction("-y")
         self.server.gui.configure_theme(control_width="large", show_share_button=False)
         self.server.gui.main_panel.dock_right()  # the canvas is not under the panel
-        self.server.initial_camera.up = (0.0, -1.0, 0.0)
-        self.server.on_client_connect(self._on_connect)
+        self.cameras = PageCameras(self.server, self._framing, lambda client: self.set_layout(
+            "3D model" if self.model is not None else "Angiograms", client=client))
 
-    def _initial_camera(self) -> None:
-        """The camera a (re)loaded page starts with: the current layout's framing."""
-        fr = scene.layout_framing(self.layout, self.views,
-                                  None if self.model is None else self.model.position)
-        dist = scene.camera_distance(fr, aspect=1.1)  # canvas beside the fixed panel
-        cam = self.server.initial_camera
-        cam.look_at = tuple(fr.centre)
-        cam.position = tuple(fr.centre - scene.STRAIGHT * dist)
-
-    def _on_connect(self, client: viser.ClientHandle) -> None:
-        """A page (re)loaded: frame its camera on the current layout; a user's rotation in
-        an angiogram layout turns the page to the 3D model (the angiograms never tilt)."""
-        def on_camera(_camera: object) -> None:
-            if self._framing_now:
-                return
-            framed = self._framed_aspect.get(client.client_id)
-            if framed is not None and abs(float(client.camera.aspect) - framed) > 0.02:
-                self._frame_client(client)  # the canvas changed size (panel docked, resize)
-                return
-            if time.monotonic() - self._framed_at.get(client.client_id, 0.0) < FRAMING_SETTLE_S:
-                return  # our own camera move (the page animates it) is not the user's
-            if (self.layout != "3D model"
-                    and scene.camera_rotated_deg(client) > scene.ROTATED_DEG):
-                self.set_layout("3D model" if self.model is not None else "Angiograms",
-                                client=client)
-
-        client.camera.on_update(on_camera)
-        self._frame_client(client)
-
-    _framing_now = False
-
-    def _frame_client(self, client: viser.ClientHandle) -> None:
-        fr = scene.layout_framing(self.layout, self.views,
-                                  None if self.model is None else self.model.position)
-        self._framing_now = True
-        try:
-            self._framed_aspect[client.client_id] = float(client.camera.aspect)
-            self._framed_at[client.client_id] = time.monotonic()
-            scene.apply_framing(client, fr)
-        except Exception:  # a client that went away
-            log.debug("camera framing failed", exc_info=True)
-        finally:
-            self._framing_now = False
+    def _framing(self, layout: str | None = None) -> scene.Framing:
+        return scene.layout_framing(layout or self.layout, self.views,
+                                    None if self.model is None else self.model.position)
 
     def set_layout(self, layout: str, client: object | None = None) -> None:
         """Show "Angiograms" (straight on both images), "Angiograms + 3D" or "3D model"
         (the model alone, the camera orbiting it)."""
         with self._lock:
-            fr = scene.layout_framing(layout, self.views,
-                                      None if self.model is None else self.model.position)
+            fr = self._framing(layout)
             self.layout = layout
             scene.set_visibility(self.views, None if self.model is None else self.model.root,
                                  fr)
             self.panels.show_layout(layout)
-            self._initial_camera()
-        for c in list(self.server.get_clients().values()):
-            self._frame_client(c)
+            self.cameras.rotation_matters = layout != "3D model"
+        self.cameras.frame_all()
 
     # ================================================================ basics
     @property
