@@ -68,10 +68,17 @@ _COUNT = _number(int, 1)
 _INDEX = _number(int, 0)
 
 
-def _add_geometry_options(p: argparse.ArgumentParser) -> None:
+def _add_geometry_options(p: argparse.ArgumentParser, per_file: bool = False) -> None:
     g = p.add_argument_group(
-        "geometry overrides (for files that lack the tags; apply to every file given)"
+        "geometry overrides (for files that lack the tags; apply to every file given; a "
+        "header value they replace is named in a warning)"
     )
+    if per_file:
+        for view in ("a", "b"):
+            g.add_argument(
+                f"--geometry-{view}", metavar="FILE",
+                help=f"geometry JSON for file {view.upper()} only (any of alpha_deg, beta_deg, "
+                "sid_mm, sod_mm, pixel_spacing_mm); wins over the flags for every file")
     g.add_argument("--alpha-deg", type=_FINITE, help="primary angle, degrees (LAO +, RAO -)")
     g.add_argument("--beta-deg", type=_FINITE, help="secondary angle, degrees (CRA +, CAU -)")
     g.add_argument("--sid-mm", type=_FINITE, help="source to detector distance, mm")
@@ -105,6 +112,24 @@ def _overrides(args: argparse.Namespace):
         return from_json
     from_cli = GeometryOverrides(**changes, source="command line")
     return from_cli.merged_over(from_json)
+
+
+def _overrides_ab(args: argparse.Namespace):
+    """(overrides of file A, of file B): each file's --geometry-a/-b JSON over the
+    values given for every file."""
+    from recon.io.overrides import per_file_overrides
+
+    common = _overrides(args)
+    return tuple(per_file_overrides(common, getattr(args, f"geometry_{v}", None))
+                 for v in ("a", "b"))
+
+
+def _warn_replaced(angio) -> None:
+    """A warning on stderr for each header value a user's value replaced."""
+    from recon.io.overrides import header_replacements
+
+    for note in header_replacements(angio.geometry_notes):
+        print(f"coronary3d: warning: {Path(angio.path).name}: {note}", file=sys.stderr)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -205,8 +230,14 @@ def build_parser() -> argparse.ArgumentParser:
         help="also write measurements-sr.dcm, a DICOM Structured Report (TID 1500) of the "
         "measurements in the inputs' patient and study (DICOM inputs only)",
     )
+    p.add_argument("--report", action="store_true",
+                   help="also write report.pdf, a one-page report beside report.json (no "
+                   "patient name, ID or date unless --identify)")
+    p.add_argument("--identify", action="store_true",
+                   help="put the patient name, ID and study date from the DICOM headers in "
+                   "report.pdf")
     p.add_argument("--quiet", action="store_true", help="no progress on stderr")
-    _add_geometry_options(p)
+    _add_geometry_options(p, per_file=True)
 
     p = sub.add_parser(
         "batch",
@@ -242,6 +273,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--host", default="127.0.0.1")
     p.add_argument("--port", type=_number(int, 0, 65535), default=8080,
                    help="port to serve on (0: any free port)")
+    _add_geometry_options(p, per_file=True)
 
     p = sub.add_parser(
         "bench",
@@ -362,10 +394,12 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
         if not args.quiet:
             print(f"[{fraction * 100:5.1f}%] {stage}", file=sys.stderr, flush=True)
 
-    overrides = _overrides(args)
+    overrides_a, overrides_b = _overrides_ab(args)
     t0 = time.perf_counter()
-    angio_a = load_angiogram(file_a, frame=args.frame_a, overrides=overrides)
-    angio_b = load_angiogram(file_b, frame=args.frame_b, overrides=overrides)
+    angio_a = load_angiogram(file_a, frame=args.frame_a, overrides=overrides_a)
+    angio_b = load_angiogram(file_b, frame=args.frame_b, overrides=overrides_b)
+    for angio in (angio_a, angio_b):
+        _warn_replaced(angio)
     sr_sources = None
     if args.sr:  # refused before the reconstruction when the inputs cannot carry an SR
         from recon.io.sr import read_sr_sources
@@ -392,6 +426,12 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
         rec = reconstruct_pair(angio_a, angio_b, seeds, options, progress=progress)
         parts = [(seeds.segments[segment].name, rec)]
     written = write_outputs(rec, Path(args.out), formats=formats, sr_sources=sr_sources)
+    if args.report:
+        from recon.io.report_pdf import write_report_pdf
+
+        written = [*written, write_report_pdf(Path(args.out) / "report.pdf", rec,
+                                              angio_a.image, angio_b.image,
+                                              identify=args.identify)]
     for line in rec.warnings:  # shown even with --quiet: they qualify the numbers
         print(f"coronary3d: warning: {line}", file=sys.stderr)
     if not args.quiet:
@@ -510,6 +550,7 @@ def cmd_view(args: argparse.Namespace) -> int:
     file_a = args.file_a or str(demo["a"])
     file_b = args.file_b or str(demo["b"])
     seeds = args.seeds or (str(demo["seeds"]) if demo else None)
+    overrides_a, overrides_b = _overrides_ab(args)
     run_viewer(
         file_a,
         file_b,
@@ -517,6 +558,8 @@ def cmd_view(args: argparse.Namespace) -> int:
         host=args.host,
         port=args.port,
         on_ready=lambda url: print(f"coronary3d viewer: {url}", flush=True),
+        overrides_a=overrides_a,
+        overrides_b=overrides_b,
     )
     return 0
 

@@ -6,7 +6,7 @@ the command line (`coronary3d reconstruct`) and the viewer both call it.
     trace both views -> calibrate view B on the clicked features (PALM, eq. 5)
     -> match (CBOCD + DP, eqs. 6-10)
     -> triangulate + smooth (eqs. 2-3) -> elliptic sections + surface
-       (sec. 3.5, eq. 11) -> 3D measurements
+       (sec. 3.5, eq. 11) -> 3D measurements -> foreshortening and the best next view
 
 Self-calibration (off by default, ``ReconstructionOptions.self_calibration``)
 adds, after the first matching, a recalibration with the deviation pairs
@@ -34,6 +34,7 @@ from recon.geometry import MIN_VIEW_SEPARATION_DEG, ViewGeometry, view_separatio
 from recon.intensity import resolve_mapping
 from recon.matching import match_centerlines
 from recon.measure import LumenProfile, Measurements, lumen_profile, measure_lumen
+from recon.optimal_view import OptimalView, optimal_view
 from recon.seeds import Seeds
 from recon.surface import SurfaceResult, build_surface
 from recon.triangulation import build_centerline_3d, table3_metrics
@@ -112,6 +113,7 @@ class Reconstruction:
     # about the inputs and the stretches that failed it
     consistency: ConsistencyResult | None = None
     warnings: tuple[str, ...] = ()
+    optimal_view: OptimalView | None = None  # foreshortening map and the best next view
 
     def report(self) -> dict:
         """JSON-ready report: inputs, geometry, calibration, matching, measurements, timings."""
@@ -175,6 +177,8 @@ class Reconstruction:
                 "b": _intensity_report(self.centerline_b),
             },
             "consistency": self.consistency.to_dict() if self.consistency is not None else None,
+            "optimal_view": (self.optimal_view.to_dict() if self.optimal_view is not None
+                             else None),
             "warnings": list(self.warnings),
             "timings_ms": self.timings_ms,
         }
@@ -209,10 +213,23 @@ def _features(seeds: Seeds, segment_index: int, cl_a: Centerline2D | None = None
 
 def calibrate_from_seeds(
     angio_a: Angiogram, angio_b: Angiogram, seeds: Seeds, optimizer: str = "palm",
-    segment: int = 0,
+    segment: int = 0, vesselness: tuple[VesselnessMap, VesselnessMap] | None = None,
+    intensity: tuple[str, str] = ("auto", "auto"),
 ) -> CalibrationResult:
-    """Calibrate view B on the clicked correspondences alone (the viewer's Calibrate)."""
-    pa, pb = _features(seeds, segment)
+    """Calibrate view B on the clicked correspondences (the viewer's Calibrate).
+
+    With ``vesselness`` (both views' maps) the segment is traced first and its traced
+    ends are used, exactly as in :func:`reconstruct_pair`'s calibration step, so both
+    report the same figures for the same clicks; without, the clicked ends are used.
+    """
+    cl_a = cl_b = None
+    if vesselness is not None:
+        seg = _segment(seeds, segment)
+        cl_a = _trace(angio_a, seg.a, vesselness[0], "A",
+                      angio_a.geometry.pixel_mm_at_isocenter, intensity[0])
+        cl_b = _trace(angio_b, seg.b, vesselness[1], "B",
+                      angio_b.geometry.pixel_mm_at_isocenter, intensity[1])
+    pa, pb = _features(seeds, segment, cl_a, cl_b)
     return calibrate(angio_a.geometry, angio_b.geometry, pa, pb, method=optimizer)
 
 
@@ -319,6 +336,11 @@ def reconstruct_pair(
     profile = lumen_profile(cl3d.s_mm, surface.sections.area_mm2)
     measurements = measure_lumen(profile)
     lap("measure")
+
+    # 8. Foreshortening in both views and the best next view (recon.optimal_view).
+    radius_mm = np.interp(cl3d.s_mm, profile.s_mm, profile.diameter_smooth_mm) / 2.0
+    best_view = optimal_view(cl3d.X_world, radius_mm, view_a, {"a": view_a, "b": cal.view_b})
+    lap("optimal_view")
     timings["total"] = round(sum(timings.values()), 2)
     _notify(progress, "done", 1.0)
 
@@ -343,6 +365,7 @@ def reconstruct_pair(
         timings_ms=timings,
         consistency=consistency,
         warnings=tuple(warnings),
+        optimal_view=best_view,
     )
 
 

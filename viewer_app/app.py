@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import logging
+import re
 import tempfile
 import threading
 import time
@@ -24,7 +25,7 @@ import numpy as np
 import viser
 from numpy.typing import NDArray
 
-from recon.errors import OutputError
+from recon.errors import LoadError, OutputError
 from recon.io import (
     MESH_FORMATS,
     demo_paths,
@@ -33,13 +34,14 @@ from recon.io import (
     outputs_as_bytes,
     save_seeds,
 )
+from recon.io.overrides import header_replacements
 from recon.seeds import Seeds
 from recon.types import Angiogram
 from viewer_app import scene
+from viewer_app.camera import PageCameras
 from viewer_app.panels import Panels, build_panels
-from viewer_app.scene import PANEL_SHIFT, View
+from viewer_app.scene import LAYOUTS, ModelNodes, View
 from viewer_app.state import (
-    MODE_LABELS,
     Autosave,
     Mark,
     MarkState,
@@ -48,6 +50,7 @@ from viewer_app.state import (
 
 if TYPE_CHECKING:
     from recon.calibration import CalibrationResult
+    from recon.io.overrides import GeometryOverrides
     from recon.pipeline import Reconstruction
 
 __all__ = ["ViewerApp", "run_viewer", "EXPORT_KINDS"]
@@ -72,6 +75,8 @@ class ViewerApp:
     frame_a, frame_b : 0-based frames of cine runs (None: the loader's choice).
     autosave_path : where marks are autosaved; None:
         ``~/.cache/coronary3d/autosave/<pair>.json``.
+    overrides_a, overrides_b : geometry values for file A / B (``coronary3d view
+        --geometry-a`` ...); a header value they replace is named in a warning.
 
     Raises
     ------
@@ -89,6 +94,8 @@ class ViewerApp:
         frame_a: int | None = None,
         frame_b: int | None = None,
         autosave_path: str | Path | None = None,
+        overrides_a: GeometryOverrides | None = None,
+        overrides_b: GeometryOverrides | None = None,
     ) -> None:
         if (path_a is None) != (path_b is None):
             raise ValueError("give both angiograms (A and B) or none for the demo case")
@@ -107,19 +114,44 @@ class ViewerApp:
         self.progress_log: list[tuple[str, float]] = []
         self._tmpdir = tempfile.TemporaryDirectory(prefix="coronary3d-viewer-")
         self._busy = False
+        self.layout = LAYOUTS[0]  # what the page shows: one of scene.LAYOUTS
+        self.model: ModelNodes | None = None
+        self.lesion: dict[str, float] | None = None  # lesion ends set by hand (mm), if any
 
-        angio_a = load_angiogram(path_a, frame=frame_a)
-        angio_b = load_angiogram(path_b, frame=frame_b)
+        angio_a = load_angiogram(path_a, frame=frame_a, overrides=overrides_a)
+        angio_b = load_angiogram(path_b, frame=frame_b, overrides=overrides_b)
         seeds = load_seeds(seeds_path) if seeds_path is not None else None
+        self.pending_pair: tuple[str, str] | None = None  # a pair waiting for its geometry
 
         self.server = viser.ViserServer(host=host, port=port, verbose=False)
-        self.server.scene.set_up_direction("-y")
-        self.server.initial_camera.position = (PANEL_SHIFT, -0.05, -1.5)
-        self.server.initial_camera.look_at = (PANEL_SHIFT, -0.05, 0.0)
-        self.server.initial_camera.up = (0.0, -1.0, 0.0)
-        self.server.gui.configure_theme(control_width="large", show_share_button=False)
+        self._setup_page()
         self.panels: Panels = build_panels(self.server.gui, self)
         self._set_pair(angio_a, angio_b, Path(path_a).name, Path(path_b).name, seeds, seeds_path)
+
+    # ================================================================ page
+    def _setup_page(self) -> None:
+        """Theme and the pages' cameras (viewer_app.camera)."""
+        self.server.scene.set_up_direction("-y")
+        self.server.gui.configure_theme(control_width="large", show_share_button=False)
+        self.server.gui.main_panel.dock_right()  # the canvas is not under the panel
+        self.cameras = PageCameras(self.server, self._framing, lambda client: self.set_layout(
+            "3D model" if self.model is not None else "Angiograms", client=client))
+
+    def _framing(self, layout: str | None = None) -> scene.Framing:
+        return scene.layout_framing(layout or self.layout, self.views,
+                                    None if self.model is None else self.model.position)
+
+    def set_layout(self, layout: str, client: object | None = None) -> None:
+        """Show "Angiograms" (straight on both images), "Angiograms + 3D" or "3D model"
+        (the model alone, the camera orbiting it)."""
+        with self._lock:
+            fr = self._framing(layout)
+            self.layout = layout
+            scene.set_visibility(self.views, None if self.model is None else self.model.root,
+                                 fr)
+            self.panels.show_layout(layout)
+            self.cameras.rotation_matters = layout != "3D model"
+        self.cameras.frame_all()
 
     # ================================================================ basics
     @property
@@ -183,6 +215,7 @@ class ViewerApp:
             self.state = MarkState(angio_a.geometry, angio_b.geometry, snapper=self._snap)
             self.reconstruction = None
             self.calibration = None
+            self.model = None
             if seeds is not None:
                 self.state.load_seeds(seeds)
             path = self._autosave_arg or default_autosave_path(angio_a.path, angio_b.path)
@@ -192,8 +225,12 @@ class ViewerApp:
             for v in self.views.values():
                 scene.add_view_nodes(self.server.scene, v, self._make_click_callback(v.key))
             self.panels.show_pair(self.views)
+            self.panels.show_geometry(
+                {k: v.angio.geometry.to_dict() for k, v in self.views.items()},
+                {k: v.display_name for k, v in self.views.items()})
             self._clear_results()
             self._redraw_marks()
+        self.set_layout("Angiograms")
         for view in self.views.values():  # vesselness in the background, once per image
             threading.Thread(target=self._warm_vesselness, args=(view,), daemon=True).start()
 
@@ -211,20 +248,75 @@ class ViewerApp:
         frame_a: int | None = None,
         frame_b: int | None = None,
         client: object | None = None,
+        overrides_a: GeometryOverrides | None = None,
+        overrides_b: GeometryOverrides | None = None,
     ) -> bool:
-        """Open two other files; a bad file gives an error notification and returns False."""
+        """Open two other files; a bad file gives an error notification and returns False.
+        A file that lacks SID, SOD or pixel spacing fills the Geometry folder with what its
+        header has, to be completed there ("Open with this geometry")."""
 
         def run() -> bool:
-            angio_a = load_angiogram(path_a, frame=frame_a)
-            angio_b = load_angiogram(path_b, frame=frame_b)
+            try:
+                angio_a = load_angiogram(path_a, frame=frame_a, overrides=overrides_a)
+                angio_b = load_angiogram(path_b, frame=frame_b, overrides=overrides_b)
+            except LoadError as exc:
+                if "missing" in str(exc) and self._offer_geometry(path_a, path_b, client):
+                    raise LoadError(re.sub(r"give --[\w-]+ or a geometry JSON",
+                                           "enter it under Geometry", str(exc))) from None
+                raise
             with self._lock:
                 self._autosave()
+            self.pending_pair = None
             self._set_pair(angio_a, angio_b, Path(path_a).name, Path(path_b).name, None, None)
             self.notify("Opened", f"A: {Path(path_a).name}, B: {Path(path_b).name}", "success",
                         client)
             return True
 
         return bool(self.guard("Open", client, run))
+
+    def _offer_geometry(self, path_a: str, path_b: str, client: object | None) -> bool:
+        """Fill the Geometry folder from the two files' headers (missing values empty);
+        False when a file cannot be read at all."""
+        from recon.io.describe import describe_file
+
+        headers = {}
+        for key, path in (("a", path_a), ("b", path_b)):
+            try:
+                headers[key] = describe_file(path)["geometry"]
+            except LoadError:
+                return False  # unreadable: the error notification says why
+        self.pending_pair = (path_a, path_b)
+        self.panels.show_geometry(headers, {k: Path(p).name for k, p in
+                                            (("a", path_a), ("b", path_b))})
+        self.notify("Geometry needed", "enter the missing SID, SOD or pixel spacing under "
+                    "Geometry, then press 'Open with this geometry'", "warning", client)
+        return True
+
+    def apply_geometry(self, entries: dict[str, dict[str, str]],
+                       client: object | None = None) -> bool:
+        """Open the pending pair (or reopen the current one) with typed geometry values
+        (view -> key -> text, "" keeps the header's); a replaced header value is named in
+        a warning."""
+        from recon.io.describe import describe_file
+        from recon.io.overrides import overrides_from_entries
+
+        def run() -> bool:
+            pair = self.pending_pair or (self.views["a"].angio.path,
+                                         self.views["b"].angio.path)
+            overrides, warnings = {}, []
+            for key, path in zip(("a", "b"), pair, strict=True):
+                header = describe_file(path)["geometry"]
+                ov, replaced = overrides_from_entries(
+                    entries[key], header, source=f"Geometry {key.upper()} ({Path(path).name})")
+                overrides[key] = ov
+                warnings += [f"{key.upper()} {Path(path).name}: {r}" for r in replaced]
+            ok = self.open_pair(pair[0], pair[1], client=client, overrides_a=overrides["a"],
+                                overrides_b=overrides["b"])
+            for w in warnings if ok else ():
+                self.notify("Header value replaced", w, "warning", client)
+            return ok
+
+        return bool(self.guard("Geometry", client, run))
 
     def open_upload(self, view: str, filename: str, content: bytes,
                     client: object | None = None) -> bool:
@@ -300,18 +392,16 @@ class ViewerApp:
                 return None
             self._redraw_marks()
             self.last_click_ms = (time.perf_counter() - t0) * 1e3
-            if self.state.last_message:
-                self.notify("Mark placed raw", f"{view.upper()}: {self.state.last_message}",
-                            "warning", client)
+            if self.state.last_message:  # shown in the marks panel, not as a toast over A
+                log.info("mark placed raw in %s: %s", view.upper(), self.state.last_message)
             self._autosave()
             return mark
 
     def set_mode(self, mode: str) -> None:
-        """One of "proximal", "waypoint", "distal", "feature"."""
+        """One of "guided", "proximal", "waypoint", "distal", "feature"."""
         with self._lock:
             self.state.set_mode(mode)
-            if self.panels.marks.mode.value != MODE_LABELS[mode]:
-                self.panels.marks.mode.value = MODE_LABELS[mode]
+            self._redraw_marks()
 
     def set_segment(self, name: str) -> None:
         """Make the segment called ``name`` the current one (an unknown name is ignored)."""
@@ -420,7 +510,11 @@ class ViewerApp:
             with self._lock:
                 seeds, segment = self._seeds_for_run()
                 a, b = self.views["a"].angio, self.views["b"].angio
-            res = calibrate_from_seeds(a, b, seeds, optimizer="palm", segment=segment)
+            maps = (self.views["a"].get_vesselness(), self.views["b"].get_vesselness())
+            # The same traced ends as Reconstruct's calibration step: the same figures.
+            res = calibrate_from_seeds(a, b, seeds, optimizer="palm", segment=segment,
+                                       vesselness=maps,
+                                       intensity=(self.intensity["a"], self.intensity["b"]))
             with self._lock:
                 self.calibration = res
                 self.state.set_calibrated_b(res.view_b)
@@ -473,6 +567,7 @@ class ViewerApp:
                 self.reconstruction = rec
                 self.calibration = rec.calibration
                 self.state.set_calibrated_b(rec.view_b)
+                self.state.select(None)  # no guide line across the results
                 self.panels.show_calibration(rec.calibration)
                 self._show_reconstruction(rec)
                 self._redraw_marks()
@@ -494,17 +589,38 @@ class ViewerApp:
 
     def _clear_results(self) -> None:
         scene.clear_results(self.server.scene, self.views)
+        self.model = None
+        self.lesion = None
         self.panels.clear_results()
 
     def _show_reconstruction(self, rec: Reconstruction) -> None:
-        """Traces and back-projections on the images, mesh + 3D centerline, table, plot."""
-        self.model_position = scene.draw_reconstruction(self.server.scene, self.views, rec)
-        scene.frame_camera_on(self.server, self.model_position, scene.MODEL_SIZE)
+        """Traces, back-projections and lesion marks on the images, the coloured mesh,
+        the results table and the profile; the page shows the angiograms and the model."""
+        self.model = scene.draw_reconstruction(self.server.scene, self.views, rec)
         self.panels.show_reconstruction(rec)
+        self.set_layout("Angiograms + 3D")
+
+    def set_lesion(self, start_mm: float, end_mm: float) -> dict[str, float]:
+        """Lesion ends set by the clinician (mm along the vessel): the measurements, the
+        chart and the MLD / lesion marks on the images and the model follow."""
+        from viewer_app.results import lesion_measurements
+
+        with self._lock:
+            rec = self.reconstruction
+            if rec is None or self.model is None:
+                raise ValueError("lesion: reconstruct first")
+            lesion = lesion_measurements(rec.profile, start_mm, end_mm)
+            self.lesion = lesion
+            self.panels.show_lesion(rec, lesion)
+            marks = {"MLD": lesion["mld_s_mm"], "lesion start": lesion["lesion_start_s_mm"],
+                     "lesion end": lesion["lesion_end_s_mm"]}
+            scene.draw_lesion_marks(self.server.scene, self.views, rec, self.model, marks,
+                                    lesion["mld_mm"])
+            return lesion
 
     def view_all(self) -> None:
-        """Camera on both images and the model."""
-        scene.view_all(self.server)
+        """Camera straight on both images and the model."""
+        self.set_layout("Angiograms + 3D" if self.model is not None else "Angiograms")
 
     # ================================================================ export
     def export(self, kind: str) -> bytes:
@@ -548,6 +664,8 @@ def run_viewer(
     on_ready: Callable[[str], None] | None = None,
     autosave_path: str | Path | None = None,
     stop_event: threading.Event | None = None,
+    overrides_a: GeometryOverrides | None = None,
+    overrides_b: GeometryOverrides | None = None,
 ) -> None:
     """Serve the viewer until interrupted (Ctrl-C) or ``stop_event`` is set.
 
@@ -556,7 +674,12 @@ def run_viewer(
     SeedsError (one line) when the initial files cannot be used.
     """
     app = ViewerApp(path_a, path_b, seeds_path, host=host, port=port, frame_a=frame_a,
-                    frame_b=frame_b, autosave_path=autosave_path)
+                    frame_b=frame_b, autosave_path=autosave_path, overrides_a=overrides_a,
+                    overrides_b=overrides_b)
+    for v in app.views.values():  # a header value replaced by a flag is said, not silent
+        for note in header_replacements(v.angio.geometry_notes):
+            log.warning("%s: %s", v.display_name, note)
+            app.notify("Header value replaced", f"{v.key.upper()}: {note}", "warning")
     if on_ready is not None:
         on_ready(app.url)
     stop = stop_event or threading.Event()

@@ -29,10 +29,12 @@ from viewer_app.results import (
     NO_RECONSTRUCTION_TEXT,
     NOT_CALIBRATED_TEXT,
     calibration_markdown,
+    clinical_markdown,
     info_markdown,
     marks_markdown,
     results_markdown,
 )
+from viewer_app.scene import LAYOUTS
 from viewer_app.state import MODE_LABELS, MODES
 
 if TYPE_CHECKING:
@@ -98,6 +100,7 @@ class CasePanel:
 class MarksPanel:
     """Click mode, segments, the selected mark, undo / clear and the marks summary."""
 
+    guide: viser.GuiMarkdownHandle  # what the next click in A and in B places
     mode: viser.GuiDropdownHandle
     segment: viser.GuiDropdownHandle
     new_segment: viser.GuiButtonHandle
@@ -105,6 +108,19 @@ class MarksPanel:
     undo: viser.GuiButtonHandle
     clear: viser.GuiButtonHandle
     summary: viser.GuiMarkdownHandle
+
+
+@dataclass(frozen=True)
+class GeometryPanel:
+    """SID, SOD and pixel spacing per file, prefilled from the header, for files that
+    lack them; "Open with this geometry" (re)opens the pair with the typed values."""
+
+    note: viser.GuiMarkdownHandle
+    fields: dict[str, dict[str, viser.GuiTextHandle]]  # view -> key -> text field
+    apply: viser.GuiButtonHandle
+
+    def entries(self) -> dict[str, dict[str, str]]:
+        return {v: {k: str(h.value) for k, h in f.items()} for v, f in self.fields.items()}
 
 
 @dataclass(frozen=True)
@@ -129,9 +145,12 @@ class ResultsPanel:
 
     reconstruct: viser.GuiButtonHandle
     progress: viser.GuiProgressBarHandle
-    view_all: viser.GuiButtonHandle
-    markdown: viser.GuiMarkdownHandle
+    layout: viser.GuiDropdownHandle  # Angiograms / Angiograms + 3D / 3D model
+    clinical: viser.GuiMarkdownHandle  # the measurements in clinical words
     plot: viser.GuiImageHandle
+    lesion_start: viser.GuiSliderHandle  # lesion ends (mm along the vessel), movable
+    lesion_end: viser.GuiSliderHandle
+    markdown: viser.GuiMarkdownHandle  # engineering figures, in a folded folder
 
 
 @dataclass(frozen=True)
@@ -148,6 +167,7 @@ class Panels:
     """Every panel of the control panel, top to bottom, and the ways the app fills them."""
 
     case: CasePanel
+    geometry: GeometryPanel
     marks: MarksPanel
     seeds: SeedsPanel
     calibrate: CalibratePanel
@@ -176,6 +196,23 @@ class Panels:
                     fr.visible = False
             self.show_info(views)
 
+    def show_geometry(self, headers: Mapping[str, Mapping[str, object]],
+                      names: Mapping[str, str]) -> None:
+        """Prefill the Geometry folder: each file's values (None: missing, left empty)."""
+        missing = []
+        for view, fields in self.geometry.fields.items():
+            for key, h in fields.items():
+                value = headers[view].get(key)
+                if value is None:
+                    missing.append(f"{view.upper()} {GEOMETRY_WORDS[key]}")
+                    h.value = ""
+                else:
+                    h.value = f"{float(np.asarray(value, float).reshape(-1)[0]):g}"
+        text = (f"A: {names['a']} · B: {names['b']}. Empty fields are missing from the file"
+                f"{': ' + ', '.join(missing) if missing else ''}. A value that differs from "
+                "the header's replaces it, with a warning.")
+        self.geometry.note.content = text
+
     def show_info(self, views: Mapping[str, View]) -> None:
         a, b = views["a"], views["b"]
         self.case.info.content = info_markdown(a.angio, b.angio, a.display_name, b.display_name)
@@ -183,7 +220,10 @@ class Panels:
     def show_marks(self, st: MarkState, last_click_ms: float, autosave_path: str | Path) -> None:
         """The segment and selection lists, and the marks summary."""
         panel = self.marks
+        panel.guide.content = st.guide_text()
         with self.refreshing.during():
+            if panel.mode.value != MODE_LABELS[st.mode]:
+                panel.mode.value = MODE_LABELS[st.mode]
             panel.segment.options = tuple(st.segment_names)
             panel.segment.value = st.segment_names[st.current_segment]
             options = ["(none)"] + [f"{m.view.upper()} {st.label(m)} #{m.id}" for m in st.marks]
@@ -193,6 +233,11 @@ class Panels:
                                   if sel is not None else "(none)")
         panel.summary.content = marks_markdown(st, last_click_ms, autosave_path)
 
+    def show_layout(self, layout: str) -> None:
+        with self.refreshing.during():
+            if self.results.layout.value != layout:
+                self.results.layout.value = layout
+
     def show_calibration(self, res: CalibrationResult) -> None:
         self.calibrate.markdown.content = calibration_markdown(res)
 
@@ -201,29 +246,46 @@ class Panels:
 
     def clear_results(self) -> None:
         """No reconstruction, not calibrated, no chart."""
-        self.results.markdown.content = NO_RECONSTRUCTION_TEXT
+        r = self.results
+        r.clinical.content = NO_RECONSTRUCTION_TEXT
+        r.markdown.content = NO_RECONSTRUCTION_TEXT
         self.calibrate.markdown.content = NOT_CALIBRATED_TEXT
-        self.results.plot.visible = False
+        for h in (r.plot, r.lesion_start, r.lesion_end):
+            h.visible = False
 
     def show_reconstruction(self, rec: Reconstruction) -> None:
-        """The results tables and the diameter chart."""
-        self.results.markdown.content = results_markdown(rec)
-        self.results.plot.image = profile_plot(rec)
-        self.results.plot.visible = True
+        """The clinical table, the diameter chart with its lesion sliders, the details."""
+        r = self.results
+        r.markdown.content = results_markdown(rec)
+        s = np.asarray(rec.profile.s_mm, dtype=float)
+        m = rec.measurements
+        with self.refreshing.during():
+            for h, value in ((r.lesion_start, m.lesion_start_s_mm),
+                             (r.lesion_end, m.lesion_end_s_mm)):
+                h.min, h.max, h.step = float(s[0]), float(s[-1]), 0.1
+                h.value = float(np.round(value, 1))
+                h.visible = True
+        self.show_lesion(rec, None)
+        r.plot.visible = True
+
+    def show_lesion(self, rec: Reconstruction, lesion: dict[str, float] | None) -> None:
+        """The clinical table and the chart for the automatic or hand-set lesion ends."""
+        self.results.clinical.content = clinical_markdown(rec, lesion)
+        self.results.plot.image = profile_plot(rec, width=420, height=300, lesion=lesion)
 
 
 def build_panels(gui: viser.GuiApi, app: ViewerApp) -> Panels:
     """Add every folder to the control panel, in order, with its callbacks."""
     refreshing = Refreshing()
-    return Panels(
-        case=_case_panel(gui, app, refreshing),
-        marks=_marks_panel(gui, app, refreshing),
-        seeds=_seeds_panel(gui, app),
-        calibrate=_calibrate_panel(gui, app),
-        results=_results_panel(gui, app),
-        export=_export_panel(gui, app),
-        refreshing=refreshing,
-    )
+    marks = _marks_panel(gui, app, refreshing)  # the workflow first
+    results = _results_panel(gui, app, refreshing)
+    calibrate = _calibrate_panel(gui, app)
+    case = _case_panel(gui, app, refreshing)
+    geometry = _geometry_panel(gui, app)
+    seeds = _seeds_panel(gui, app)
+    export = _export_panel(gui, app)
+    return Panels(case=case, geometry=geometry, marks=marks, seeds=seeds,
+                  calibrate=calibrate, results=results, export=export, refreshing=refreshing)
 
 
 def _case_panel(gui: viser.GuiApi, app: ViewerApp, refreshing: Refreshing) -> CasePanel:
@@ -316,12 +378,13 @@ def _marks_panel(gui: viser.GuiApi, app: ViewerApp, refreshing: Refreshing) -> M
     # Python fires these callbacks later on viser's event loop (client None), when
     # the value read may already be stale: only a user's change may act.
     with gui.add_folder("Marks"):
+        guide = gui.add_markdown("")
         mode = gui.add_dropdown("Mode", [MODE_LABELS[m] for m in MODES],
-                                initial_value=MODE_LABELS["proximal"])
+                                initial_value=MODE_LABELS["guided"])
 
         @mode.on_update
         async def _(event: viser.GuiEvent) -> None:
-            if event.client is None:
+            if refreshing.active or event.client is None:
                 return
             app.set_mode(label_to_mode[mode.value])
 
@@ -361,8 +424,27 @@ def _marks_panel(gui: viser.GuiApi, app: ViewerApp, refreshing: Refreshing) -> M
             app.clear()
 
         summary = gui.add_markdown("")
-    return MarksPanel(mode=mode, segment=segment, new_segment=new_segment, select=select,
-                      undo=undo, clear=clear, summary=summary)
+    return MarksPanel(guide=guide, mode=mode, segment=segment, new_segment=new_segment,
+                      select=select, undo=undo, clear=clear, summary=summary)
+
+
+GEOMETRY_WORDS = {"sid_mm": "SID (mm)", "sod_mm": "SOD (mm)",
+                  "pixel_spacing_mm": "pixel spacing (mm)"}
+
+
+def _geometry_panel(gui: viser.GuiApi, app: ViewerApp) -> GeometryPanel:
+    with gui.add_folder("Geometry", expand_by_default=False):
+        note = gui.add_markdown("")
+        fields = {view: {key: gui.add_text(f"{view.upper()} {word}", "")
+                         for key, word in GEOMETRY_WORDS.items()} for view in VIEW_KEYS}
+        apply = gui.add_button("Open with this geometry", icon=viser.Icon.CHECK)
+    panel = GeometryPanel(note=note, fields=fields, apply=apply)
+
+    @apply.on_click
+    def _(event: viser.GuiEvent) -> None:
+        app.apply_geometry(panel.entries(), client=event.client)
+
+    return panel
 
 
 def _seeds_panel(gui: viser.GuiApi, app: ViewerApp) -> SeedsPanel:
@@ -409,7 +491,7 @@ def _calibrate_panel(gui: viser.GuiApi, app: ViewerApp) -> CalibratePanel:
     return CalibratePanel(button=button, markdown=markdown)
 
 
-def _results_panel(gui: viser.GuiApi, app: ViewerApp) -> ResultsPanel:
+def _results_panel(gui: viser.GuiApi, app: ViewerApp, refreshing: Refreshing) -> ResultsPanel:
     with gui.add_folder("Reconstruct"):
         reconstruct = gui.add_button("Reconstruct", icon=viser.Icon.PLAYER_PLAY, color="green")
 
@@ -422,17 +504,33 @@ def _results_panel(gui: viser.GuiApi, app: ViewerApp) -> ResultsPanel:
                 reconstruct.disabled = False
 
         progress = gui.add_progress_bar(0.0, animated=False)
-        view_all = gui.add_button("Camera: images + model", icon=viser.Icon.EYE)
+        layout = gui.add_dropdown("Show", list(LAYOUTS), initial_value=LAYOUTS[0])
 
-        @view_all.on_click
+        @layout.on_update
         def _(event: viser.GuiEvent) -> None:
-            app.view_all()
+            if refreshing.active or event.client is None:
+                return
+            app.guard("Show", event.client, lambda: app.set_layout(str(layout.value)))
 
-        markdown = gui.add_markdown("")
+        clinical = gui.add_markdown("")
         plot = gui.add_image(np.full((8, 8, 3), 255, np.uint8),
                              label="Diameter along the vessel", visible=False)
-    return ResultsPanel(reconstruct=reconstruct, progress=progress, view_all=view_all,
-                        markdown=markdown, plot=plot)
+        lesion_start = gui.add_slider("Lesion start (mm)", 0.0, 1.0, 0.1, 0.0, visible=False)
+        lesion_end = gui.add_slider("Lesion end (mm)", 0.0, 1.0, 0.1, 1.0, visible=False)
+
+        def lesion_moved(event: viser.GuiEvent) -> None:
+            if refreshing.active:
+                return
+            app.guard("Lesion", event.client,
+                      lambda: app.set_lesion(lesion_start.value, lesion_end.value))
+
+        lesion_start.on_update(lesion_moved)
+        lesion_end.on_update(lesion_moved)
+        with gui.add_folder("Details (engineering)", expand_by_default=False):
+            markdown = gui.add_markdown("")
+    return ResultsPanel(reconstruct=reconstruct, progress=progress, layout=layout,
+                        clinical=clinical, plot=plot, lesion_start=lesion_start,
+                        lesion_end=lesion_end, markdown=markdown)
 
 
 def _export_panel(gui: viser.GuiApi, app: ViewerApp) -> ExportPanel:

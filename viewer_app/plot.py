@@ -14,13 +14,22 @@ if TYPE_CHECKING:
 __all__ = ["profile_plot"]
 
 
-def profile_plot(rec: Reconstruction, width: int = 640, height: int = 360) -> NDArray[np.uint8]:
-    """Diameter along the vessel as an RGB image (H, W, 3): measured, reference, MLD, lesion."""
+def profile_plot(rec: Reconstruction, width: int = 640, height: int = 360,
+                 lesion: dict[str, float] | None = None) -> NDArray[np.uint8]:
+    """Diameter along the vessel as an RGB image (H, W, 3): measured, reference, MLD, lesion.
+
+    ``lesion``: MLD and lesion ends the clinician set (keys ``mld_mm``, ``mld_s_mm``,
+    ``lesion_start_s_mm``, ``lesion_end_s_mm``, and optionally ``proximal_reference_mm``
+    / ``distal_reference_mm`` for the straight reference between the ends); None: the
+    automatic analysis.
+    """
     prof = rec.profile
     s = np.asarray(prof.s_mm, dtype=float)
     d = np.asarray(prof.diameter_mm, dtype=float)
     ref = np.asarray(prof.reference_diameter_mm, dtype=float)
     meas = rec.measurements.to_dict()
+    if lesion is not None:
+        meas = {**meas, **lesion}
     img = np.full((height, width, 3), 255, np.uint8)
     left, right, top, bottom = 56, 14, 26, 40
     x0, x1 = float(s.min()), float(max(s.max(), s.min() + 1e-6))
@@ -48,6 +57,10 @@ def profile_plot(rec: Reconstruction, width: int = 640, height: int = 360) -> ND
         cv2.putText(img, f"{xv:.0f}", (x - 8, height - bottom + 16), font, 0.4, (60, 60, 60),
                     1, cv2.LINE_AA)
     cv2.polylines(img, [px(s, ref)], False, (150, 150, 150), 1, cv2.LINE_AA)
+    if lesion is not None and "proximal_reference_mm" in lesion:
+        ends = np.array([lesion["lesion_start_s_mm"], lesion["lesion_end_s_mm"]])
+        refs = np.array([lesion["proximal_reference_mm"], lesion["distal_reference_mm"]])
+        cv2.polylines(img, [px(ends, refs)], False, (90, 90, 90), 2, cv2.LINE_AA)
     smooth = getattr(prof, "diameter_smooth_mm", None)
     if smooth is not None:
         cv2.polylines(img, [px(s, d)], False, (160, 190, 235), 1, cv2.LINE_AA)

@@ -7,6 +7,7 @@ calibration or reconstruction.
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -25,6 +26,8 @@ __all__ = [
     "NO_RECONSTRUCTION_TEXT",
     "angle_text",
     "calibration_markdown",
+    "clinical_markdown",
+    "lesion_measurements",
     "fmt",
     "info_markdown",
     "marks_markdown",
@@ -106,7 +109,16 @@ def calibration_markdown(res: CalibrationResult) -> str:
         f" translation ({', '.join(f'{x:.2f}' for x in t_mm)} mm); "
         f"{res.iterations} iterations, {res.elapsed_ms:.0f} ms.",
     ]
-    lines += [f"- ⚠ {w}" for w in getattr(res, "warnings", ())]
+    for w in getattr(res, "warnings", ()):
+        found = re.match(r"underdetermined: (\d+) features", w)
+        if found:  # expected with few landmarks: guidance, not an alarm
+            k = int(found.group(1))
+            lines.append(f"- ℹ {k} correspondences (the 2 segment ends + {k - 2} landmark "
+                         f"pair(s)): with 5 or more the images alone fix view B's pose; "
+                         f"with fewer the header's expected accuracy fills in. Add "
+                         f"{5 - k} landmark pair(s) (branch points) to firm it up.")
+        else:
+            lines.append(f"- ⚠ {w}")
     return "\n".join(lines)
 
 
@@ -133,4 +145,84 @@ def results_markdown(rec: Reconstruction) -> str:
     rows += [f"| {k} | {fmt(v)} |" for k, v in metrics.items()]
     rows += ["", "| stage | ms |", "| --- | --- |"]
     rows += [f"| {k} | {fmt(v)} |" for k, v in rec.timings_ms.items()]
+    return "\n".join(rows)
+
+
+def lesion_measurements(profile: object, start_mm: float, end_mm: float) -> dict[str, float]:
+    """2D-QCA style measurements for lesion ends the clinician placed.
+
+    The reference diameter runs linearly from the (smoothed) diameter at the proximal
+    end of the lesion to that at its distal end; the MLD is the smallest smoothed
+    diameter between them. ``profile`` is a recon.measure.LumenProfile (``s_mm``,
+    ``diameter_smooth_mm``, (M,) arrays). Returns a dict with the keys of
+    :class:`recon.measure.Measurements` that depend on the lesion ends, plus
+    ``proximal_reference_mm`` and ``distal_reference_mm``.
+    """
+    s = np.asarray(profile.s_mm, dtype=float)
+    d = np.asarray(profile.diameter_smooth_mm, dtype=float)
+    lo, hi = sorted((float(np.clip(start_mm, s[0], s[-1])), float(np.clip(end_mm, s[0], s[-1]))))
+    inside = (s >= lo) & (s <= hi)
+    if not np.any(inside):
+        inside[int(np.argmin(np.abs(s - lo)))] = True
+    idx = np.flatnonzero(inside)
+    i_mld = int(idx[np.argmin(d[idx])])
+    d_prox, d_dist = float(np.interp(lo, s, d)), float(np.interp(hi, s, d))
+    frac = 0.0 if hi <= lo else (s[i_mld] - lo) / (hi - lo)
+    ref = d_prox + frac * (d_dist - d_prox)
+    mld = float(d[i_mld])
+    return {
+        "mld_mm": mld,
+        "mld_s_mm": float(s[i_mld]),
+        "reference_diameter_mm": ref,
+        "proximal_reference_mm": d_prox,
+        "distal_reference_mm": d_dist,
+        "diameter_stenosis_pct": 100.0 * (1.0 - mld / ref),
+        "area_stenosis_pct": 100.0 * (1.0 - (mld / ref) ** 2),
+        "mla_mm2": float(np.pi * mld**2 / 4.0),
+        "lesion_start_s_mm": lo,
+        "lesion_end_s_mm": hi,
+        "lesion_length_mm": hi - lo,
+    }
+
+
+def clinical_markdown(rec: Reconstruction, lesion: dict[str, float] | None = None) -> str:
+    """The results a clinician reads, with labels and units; the foreshortening of the
+    segment in both views and the best next view when the reconstruction has them.
+
+    ``lesion``: measurements for lesion ends the clinician moved
+    (:func:`lesion_measurements`); None: the automatic analysis.
+    """
+    m = rec.measurements
+    prof = rec.profile
+    s = np.asarray(prof.s_mm, dtype=float)
+    ref_curve = np.asarray(prof.reference_diameter_mm, dtype=float)
+    if lesion is None:
+        v = {k: float(getattr(m, k)) for k in (
+            "mld_mm", "mld_s_mm", "reference_diameter_mm", "diameter_stenosis_pct",
+            "area_stenosis_pct", "mla_mm2", "lesion_start_s_mm", "lesion_end_s_mm",
+            "lesion_length_mm")}
+        v["proximal_reference_mm"] = float(np.interp(v["lesion_start_s_mm"], s, ref_curve))
+        v["distal_reference_mm"] = float(np.interp(v["lesion_end_s_mm"], s, ref_curve))
+        source = "automatic lesion detection" if m.has_lesion else "no lesion found"
+    else:
+        v, source = lesion, "lesion ends set by hand"
+    rows = [f"**3D QCA** ({source})", "", "| | |", "| --- | --- |",
+            f"| Minimal lumen diameter | **{v['mld_mm']:.2f} mm** |",
+            f"| % diameter stenosis | **{v['diameter_stenosis_pct']:.0f} %** |",
+            f"| % area stenosis | {v['area_stenosis_pct']:.0f} % |",
+            f"| Minimal lumen area | {v['mla_mm2']:.2f} mm² |",
+            f"| Reference diameter at the MLD | {v['reference_diameter_mm']:.2f} mm |",
+            f"| Proximal / distal reference | {v['proximal_reference_mm']:.2f} / "
+            f"{v['distal_reference_mm']:.2f} mm |",
+            f"| Lesion length | {v['lesion_length_mm']:.1f} mm "
+            f"({v['lesion_start_s_mm']:.1f}–{v['lesion_end_s_mm']:.1f} mm) |",
+            f"| MLD position | {v['mld_s_mm']:.1f} mm from the proximal end |",
+            f"| Segment length | {m.segment_length_mm:.1f} mm |"]
+    best = getattr(rec, "optimal_view", None)
+    if best is not None:
+        fs = best.current_foreshortening_pct
+        rows.append(f"| Foreshortening in A / B | {fs['a']:.0f} / {fs['b']:.0f} % |")
+        rows.append(f"| Best next view | **{angle_text(*best.angles_deg)}** "
+                    f"(foreshortening {best.foreshortening_pct:.1f} %, overlap "
+                    f"{best.overlap_pct:.0f} %) |")
     return "\n".join(rows)

@@ -1,15 +1,23 @@
 """What the viewer draws in viser's 3D scene.
 
 Both angiograms side by side as image planes (view A left, view B right)
-with their marks, labels, epipolar lines, traces and back-projections as
-children of the image nodes; the reconstructed mesh and 3D centerline above
-them; camera framing; and the conversion of a clicked ray to an image pixel.
+with their marks, labels, epipolar lines, traces and back-projections on
+overlay frames placed exactly over the images; the reconstructed mesh and
+3D centerline above them; camera framing; and the conversion of a clicked
+ray to an image pixel.
 
 Scene layout (viser world units; the scene's up direction is -y so that the
 image rows run downwards on screen and the camera looks along +z):
 
 - ``/view_a``, ``/view_b``: image planes, longer side :data:`IMAGE_SIZE`
-  units, node-local x along the columns and y down the rows;
+  units, node-local x along the columns and y down the rows; they are the
+  only clickable nodes;
+- ``/over_a``, ``/over_b``: frames at the same place as the images holding
+  every overlay (same local coordinates). The overlays are deliberately NOT
+  children of the clickable images: the browser's ray test hits a point
+  cloud from far away (three.js' point threshold is in world units) and a
+  hit on a child counts as a click on its parent, so marks drawn under
+  ``/view_b`` caught clicks made on image A;
 - ``/model``: the reconstruction, rotated into view A's frame (so it first
   looks like view A) and scaled to :data:`MODEL_SIZE` units, above the images.
 """
@@ -37,7 +45,6 @@ __all__ = [
     "IMAGE_SIZE",
     "IMAGE_GAP",
     "MODEL_SIZE",
-    "PANEL_SHIFT",
     "OVERLAY_Z",
     "View",
     "ViewNodes",
@@ -46,10 +53,21 @@ __all__ = [
     "draw_marks",
     "draw_flagged",
     "draw_reconstruction",
-    "frame_camera_on",
+    "diameter_colors",
+    "lesion_points",
+    "automatic_marks",
+    "draw_lesion_marks",
+    "ModelNodes",
+    "LAYOUTS",
+    "Framing",
+    "apply_framing",
+    "camera_distance",
+    "camera_rotated_deg",
+    "layout_framing",
+    "set_visibility",
+    "overlay_name",
     "ray_to_px",
     "update_image",
-    "view_all",
 ]
 
 log = logging.getLogger(__name__)
@@ -57,7 +75,6 @@ log = logging.getLogger(__name__)
 IMAGE_SIZE = 1.0  # scene units of an image's longer side
 IMAGE_GAP = 0.08  # between the two images
 MODEL_SIZE = 1.0  # scene units of the model's longest extent
-PANEL_SHIFT = 0.5  # camera x offset so the content sits left of the control panel
 OVERLAY_Z = -0.002  # overlays a hair in front of the image plane (towards the camera)
 
 KIND_COLORS = {
@@ -104,6 +121,7 @@ class ViewNodes:
     """The scene nodes of one view: the image plane and its overlays (children of the image)."""
 
     image: viser.ImageHandle
+    root: viser.FrameHandle  # /over_<key>: parent of every overlay
     marks: viser.PointCloudHandle
     selected: viser.PointCloudHandle
     epipolar: viser.LineSegmentsHandle
@@ -166,11 +184,18 @@ class View:
             return self.vesselness
 
 
+def overlay_name(key: str) -> str:
+    """Scene path of the overlay frame of view ``key`` (see the module docstring)."""
+    return f"/over_{key}"
+
+
 def add_view_nodes(scene: viser.SceneApi, v: View, on_click: Callable) -> ViewNodes:
-    """Add ``/view_<key>`` (the image, clicks go to ``on_click``) and its empty overlays."""
-    name = f"/view_{v.key}"
+    """Add ``/view_<key>`` (the image, clicks go to ``on_click``) and its empty overlays
+    under ``/over_<key>``; the overlays of a previous pair are removed first."""
+    image_name, name = f"/view_{v.key}", overlay_name(v.key)
+    scene.remove_by_name(name)  # and every child: marks, labels, results of the old pair
     image = scene.add_image(
-        name,
+        image_name,
         rgb_from_image(v.angio.image, v.level, v.width),
         v.render_w,
         v.render_h,
@@ -181,6 +206,7 @@ def add_view_nodes(scene: viser.SceneApi, v: View, on_click: Callable) -> ViewNo
         receive_shadow=False,
     )
     image.on_click(on_click)
+    root = scene.add_frame(name, show_axes=False, position=tuple(v.position))
     empty_pts = np.zeros((0, 3), np.float32)
     empty_seg = np.zeros((0, 2, 3), np.float32)
     marks = scene.add_point_cloud(
@@ -204,7 +230,7 @@ def add_view_nodes(scene: viser.SceneApi, v: View, on_click: Callable) -> ViewNo
         position=(-v.render_w / 2, -v.render_h / 2 - 0.02, 0.0),
         anchor="bottom-left",
     )
-    v.nodes = ViewNodes(image=image, marks=marks, selected=selected, epipolar=epipolar,
+    v.nodes = ViewNodes(image=image, root=root, marks=marks, selected=selected, epipolar=epipolar,
                         trace=trace, backproj=backproj, title=title)
     return v.nodes
 
@@ -241,7 +267,7 @@ def draw_marks(scene: viser.SceneApi, views: Mapping[str, View], st: MarkState) 
             h.remove()
         v.nodes.labels = [
             scene.add_label(
-                f"/view_{v.key}/labels/m{m.id}", st.label(m),
+                f"{overlay_name(v.key)}/labels/m{m.id}", st.label(m),
                 position=tuple(p + np.array([0.008, 0.008, 0.0])), anchor="top-left",
                 font_screen_scale=0.8)
             for m, p in zip(marks, pts, strict=True)
@@ -258,7 +284,8 @@ def clear_results(scene: viser.SceneApi, views: Mapping[str, View]) -> None:
     for v in views.values():
         v.nodes.trace.points = np.zeros((0, 2, 3), np.float32)
         v.nodes.backproj.points = np.zeros((0, 2, 3), np.float32)
-    names = ["/model"] + [f"/view_{k}/{n}" for k in views for n in ("flagged", "flag_labels")]
+    names = ["/model"] + [f"{overlay_name(k)}/{n}" for k in views
+                          for n in ("flagged", "flag_labels", "lesion", "lesion_labels")]
     for name in names:
         try:
             scene.remove_by_name(name)
@@ -266,12 +293,85 @@ def clear_results(scene: viser.SceneApi, views: Mapping[str, View]) -> None:
             log.debug("nothing to remove at %s", name, exc_info=True)
 
 
+def diameter_colors(d_mm: FloatArray, ref_mm: float) -> NDArray[np.uint8]:
+    """RGB (N, 3) for lumen diameters: red at or below half the reference, yellow at 75 %,
+    green at the reference and above (the usual QCA colour scale)."""
+    r = np.clip(np.asarray(d_mm, float) / max(float(ref_mm), 1e-6), 0.5, 1.0)
+    stops = np.array([0.5, 0.75, 1.0])
+    rgb = np.stack([np.interp(r, stops, [220, 240, 40]), np.interp(r, stops, [30, 200, 180]),
+                    np.interp(r, stops, [30, 40, 70])], axis=1)
+    return rgb.round().astype(np.uint8)
+
+
+@dataclass(frozen=True)
+class ModelNodes:
+    """The ``/model`` frame, where it sits (scene units) and how world mm map to it."""
+
+    root: viser.FrameHandle
+    position: FloatArray  # (3,) centre of the model
+    T_scene_from_world: FloatArray  # (4, 4) similarity: world mm -> scene units
+
+
+def draw_lesion_marks(scene: viser.SceneApi, views: Mapping[str, View], rec: Reconstruction,
+                      model: ModelNodes, marks_s_mm: Mapping[str, float],
+                      mld_mm: float) -> None:
+    """MLD and lesion ends on both angiograms (projected) and the MLD on the model."""
+    pts = lesion_points(rec, marks_s_mm)
+    names = list(pts)
+    P = np.array([pts[n] for n in names])
+    for key, geom in (("a", rec.view_a), ("b", rec.view_b)):
+        v, root = views[key], overlay_name(key)
+        scene.remove_by_name(f"{root}/lesion_labels")
+        local = v.local_from_px(geom.project(P), z=OVERLAY_Z * 1.8)
+        scene.add_point_cloud(f"{root}/lesion", local.astype(np.float32),
+                              np.array([MARKER_COLORS[n] for n in names], np.uint8),
+                              point_size=0.018, point_shape="diamond", point_shading="flat")
+        # Only the MLD is named: the lesion ends (blue) sit a few mm from it and their
+        # names would cover the vessel.
+        p = local[names.index("MLD")]
+        scene.add_label(f"{root}/lesion_labels/mld", "MLD", font_screen_scale=0.8,
+                        position=tuple(p + np.array([-0.015, 0.0, 0.0])),
+                        anchor="center-right")
+    T = model.T_scene_from_world
+    mld_scene = T[:3, :3] @ pts["MLD"] + T[:3, 3]
+    scene.add_icosphere("/model/mld", radius=0.02, color=MARKER_COLORS["MLD"],
+                        position=tuple(mld_scene), cast_shadow=False, receive_shadow=False)
+    scene.add_label("/model/mld_label", f"MLD {mld_mm:.2f} mm",
+                    position=tuple(mld_scene + np.array([0.03, 0.0, -0.03])),
+                    anchor="center-left")
+
+
+def lesion_points(rec: Reconstruction, marks_s_mm: Mapping[str, float]) -> dict[str, FloatArray]:
+    """World points (3,) at arc lengths ``marks_s_mm`` ({"MLD": s, "lesion start": s, ...})
+    along the 3D centerline."""
+    X = np.asarray(rec.centerline_3d.X_world, dtype=float)
+    s = np.asarray(rec.centerline_3d.s_mm, dtype=float)
+    return {n: np.array([np.interp(v, s, X[:, k]) for k in range(3)])
+            for n, v in marks_s_mm.items()}
+
+
+def automatic_marks(rec: Reconstruction) -> dict[str, float]:
+    """Arc lengths (mm) of the MLD and, when a lesion was found, of its two ends."""
+    m = rec.measurements
+    out = {"MLD": float(m.mld_s_mm)}
+    if m.has_lesion:
+        out["lesion start"] = float(m.lesion_start_s_mm)
+        out["lesion end"] = float(m.lesion_end_s_mm)
+    return out
+
+
+MARKER_COLORS = {"MLD": (255, 0, 200), "lesion start": (0, 120, 255), "lesion end": (0, 120, 255)}
+
+
 def draw_reconstruction(
     scene: viser.SceneApi, views: Mapping[str, View], rec: Reconstruction
-) -> FloatArray:
-    """Traces and back-projections on the images, mesh + 3D centerline; returns the model's
-    position (scene units)."""
+) -> ModelNodes:
+    """Traces, back-projections, MLD and lesion ends on the images; the mesh coloured by
+    lumen diameter with the MLD marked, and the 3D centerline, above the images."""
+    from scipy.spatial import cKDTree
+
     X = np.asarray(rec.centerline_3d.X_world, dtype=float)
+    s = np.asarray(rec.centerline_3d.s_mm, dtype=float)
     for key, cl, geom in (("a", rec.centerline_a, rec.view_a), ("b", rec.centerline_b,
                                                                 rec.view_b)):
         v = views[key]
@@ -289,21 +389,33 @@ def draw_reconstruction(
     scale = MODEL_SIZE / max(float(np.max((hi - lo)[:2])), 1e-6)
     image_top = -max(v.render_h for v in views.values()) / 2
     model_position = np.array([0.0, image_top - 0.12 - MODEL_SIZE / 2, 0.0])
+    prof = rec.profile
+    d_mm = np.interp(s, prof.s_mm, prof.diameter_smooth_mm)
+    _, nearest = cKDTree(X).query(np.asarray(mesh.vertices))
+    colors = diameter_colors(d_mm[nearest], float(np.nanmax(prof.reference_diameter_mm)))
     T = np.eye(4)
     T[:3, :3] = scale * R
     T[:3, 3] = model_position - scale * (lo + hi) / 2
+    # Its nearest point on the images' plane, the rest behind it: perspective then
+    # makes no part larger than the framing allows (nothing cut off at the top).
+    T[2, 3] = model_position[2] - scale * lo[2]
     mesh.apply_transform(T)
-    mesh.visual.face_colors = MESH_COLOR
+    mesh.visual.vertex_colors = np.column_stack([colors, np.full(len(colors), 255, np.uint8)])
+    root = scene.add_frame("/model", show_axes=False)
     scene.add_mesh_trimesh("/model/mesh", mesh, cast_shadow=False, receive_shadow=False)
     X_scene = (X @ R.T) * scale + T[:3, 3]
     scene.add_line_segments("/model/centerline", polyline_segments(X_scene).astype(
-        np.float32), (255, 220, 0), thickness=3.0, thickness_units="screen")
-    scene.add_label("/model/title", f"3D: {rec.centerline_3d.length_mm:.1f} mm "
-                    f"(view A orientation, drag to rotate)",
+        np.float32), (40, 40, 40), thickness=1.5, thickness_units="screen")
+    m = rec.measurements
+    scene.add_label("/model/title", f"3D model, {m.segment_length_mm:.1f} mm, coloured by "
+                    "diameter (green = reference, red = half of it); drag to rotate",
                     position=(-views["a"].render_w - IMAGE_GAP / 2,
                               model_position[1] - MODEL_SIZE / 2, 0.0),
                     anchor="top-left")
-    return model_position
+    centre = model_position + np.array([0.0, 0.0, scale * (hi[2] - lo[2]) / 2])
+    model = ModelNodes(root=root, position=centre, T_scene_from_world=T)
+    draw_lesion_marks(scene, views, rec, model, automatic_marks(rec), m.mld_mm)
+    return model
 
 
 def draw_flagged(scene: viser.SceneApi, views: Mapping[str, View], rec: Reconstruction
@@ -324,30 +436,97 @@ def draw_flagged(scene: viser.SceneApi, views: Mapping[str, View], rec: Reconstr
                 segments.append(polyline_segments(
                     v.local_from_px(geom.project(X[keep]), z=OVERLAY_Z * 1.4)))
         seg = np.concatenate(segments) if segments else np.zeros((0, 2, 3))
-        scene.add_line_segments(f"/view_{key}/flagged", seg.astype(np.float32), FLAGGED_COLOR,
-                                thickness=5.0, thickness_units="screen")
+        scene.add_line_segments(f"{overlay_name(key)}/flagged", seg.astype(np.float32),
+                                FLAGGED_COLOR, thickness=5.0, thickness_units="screen")
         for i, st in enumerate(st for st in stretches if st.view == key):
             p = v.local_from_px(np.array([st.middle_px]), z=OVERLAY_Z * 1.6)[0]
-            scene.add_label(f"/view_{key}/flag_labels/s{i}",
+            scene.add_label(f"{overlay_name(key)}/flag_labels/s{i}",
                             f"⚠ {st.kind.replace('_', ' ')} {st.start_mm:.0f}-{st.end_mm:.0f} mm",
                             position=tuple(p + np.array([0.01, -0.01, 0.0])),
                             anchor="bottom-left", font_screen_scale=0.8)
     return len(stretches)
 
 
-def frame_camera_on(server: viser.ViserServer, centre: FloatArray, size: float) -> None:
-    """Point every client's camera at ``centre``, far enough back to show ``size`` units."""
-    for c in server.get_clients().values():
-        try:
-            with c.atomic():
-                c.camera.up_direction = (0.0, -1.0, 0.0)
-                target = centre + [PANEL_SHIFT * size, 0.0, 0.0]
-                c.camera.position = tuple(target + [0.0, 0.0, -1.5 * size])
-                c.camera.look_at = tuple(target)
-        except Exception:
-            log.debug("camera framing failed", exc_info=True)
+CAMERA_FOV_RAD = float(np.radians(75.0))  # viser's default vertical field of view
+STRAIGHT = np.array([0.0, 0.0, 1.0])  # camera looks along +z, rows down the screen
+ROTATED_DEG = 4.0  # a camera turned further than this from STRAIGHT was rotated by the user
+
+LAYOUTS: tuple[str, ...] = ("Angiograms", "Angiograms + 3D", "3D model")
 
 
-def view_all(server: viser.ViserServer) -> None:
-    """Camera on both images and the model."""
-    frame_camera_on(server, np.array([0.0, -0.62, 0.0]), 1.45)
+@dataclass(frozen=True)
+class Framing:
+    """What a layout shows and where the camera looks (scene units)."""
+
+    images: bool
+    model: bool
+    centre: FloatArray  # (3,) look-at point
+    half_w: float  # half width and height of the content to fit
+    half_h: float
+    straight: bool  # camera straight at the images (else: keep the user's direction)
+
+
+def layout_framing(layout: str, views: Mapping[str, View],
+                   model_position: FloatArray | None) -> Framing:
+    """The framing of a layout ("Angiograms", "Angiograms + 3D", "3D model"); without a
+    model every layout shows the angiograms."""
+    if layout not in LAYOUTS:
+        raise ValueError(f"layout must be one of {', '.join(LAYOUTS)}, got {layout!r}")
+    a, b = views["a"], views["b"]
+    left = a.position[0] - a.render_w / 2
+    right = b.position[0] + b.render_w / 2
+    half_h = max(a.render_h, b.render_h) / 2
+    images_centre = np.array([(left + right) / 2, 0.0, 0.0])
+    half_w = (right - left) / 2
+    if model_position is None or layout == "Angiograms":
+        return Framing(True, False, images_centre, half_w,
+                       half_h + 0.04, True)
+    if layout == "3D model":
+        return Framing(False, True, np.asarray(model_position, float), MODEL_SIZE * 0.75,
+                       MODEL_SIZE * 0.75, False)
+    top = float(model_position[1]) - MODEL_SIZE / 2
+    centre = np.array([images_centre[0], (top + half_h) / 2, 0.0])
+    return Framing(True, True, centre, half_w, (half_h - top) / 2 + 0.04, True)
+
+
+def camera_distance(fr: Framing, aspect: float, fov_rad: float = CAMERA_FOV_RAD) -> float:
+    """Distance at which a camera of vertical field of view ``fov_rad`` and the given
+    aspect (width / height) shows the framing's content whole."""
+    t = float(np.tan(fov_rad / 2))
+    return 1.06 * max(fr.half_h / t, fr.half_w / (t * max(aspect, 0.2)))
+
+
+def apply_framing(client: viser.ClientHandle, fr: Framing) -> None:
+    """Set one client's camera to the framing (straight, or keeping its direction)."""
+    cam = client.camera
+    direction = STRAIGHT
+    if not fr.straight:
+        d = np.asarray(cam.look_at, float) - np.asarray(cam.position, float)
+        if np.linalg.norm(d) > 1e-9:
+            direction = d / np.linalg.norm(d)
+    dist = camera_distance(fr, float(cam.aspect or 1.0), float(cam.fov or CAMERA_FOV_RAD))
+    with client.atomic():
+        cam.up_direction = (0.0, -1.0, 0.0)
+        # viser moves look_at along with a new position: position first, then look_at.
+        cam.position = tuple(fr.centre - direction * dist)
+        cam.look_at = tuple(fr.centre)
+
+
+def set_visibility(views: Mapping[str, View], model: viser.FrameHandle | None,
+                   fr: Framing) -> None:
+    """Show or hide the image planes with their overlays, and the model."""
+    for v in views.values():
+        v.nodes.image.visible = fr.images
+        v.nodes.root.visible = fr.images
+    if model is not None:
+        model.visible = fr.model
+
+
+def camera_rotated_deg(client: viser.ClientHandle) -> float:
+    """Angle between a client's viewing direction and the straight view (degrees)."""
+    cam = client.camera
+    d = np.asarray(cam.look_at, float) - np.asarray(cam.position, float)
+    n = float(np.linalg.norm(d))
+    if n < 1e-9:
+        return 0.0
+    return float(np.degrees(np.arccos(np.clip(d @ STRAIGHT / n, -1.0, 1.0))))

@@ -6,6 +6,13 @@ browser. Pixel coordinates follow the project's C-arm convention: (col, row),
 
 A clinician places marks in a *mode*:
 
+- ``"guided"`` (the default): a click in a view places the first thing that
+  view still lacks: the proximal end of the current segment, then its distal
+  end, then landmarks (a landmark clicked in one view waits for its partner
+  in the other). Any order of views works; the epipolar line drawn after a
+  click is the one the next click in the other view should land on;
+- ``"proximal"`` / ``"distal"``: redo that end (one click, then back to
+  guided);
 - ``"proximal"`` / ``"distal"``: the ends of the current segment in the
   clicked view (one of each per view and segment; a new click replaces it);
 - ``"waypoint"``: a point between the ends that keeps the trace on the
@@ -46,13 +53,17 @@ __all__ = [
 
 FloatArray = NDArray[np.float64]
 
-MODES: tuple[str, ...] = ("proximal", "waypoint", "distal", "feature")
+MODES: tuple[str, ...] = ("guided", "proximal", "waypoint", "distal", "feature")
+ONE_SHOT_MODES = ("proximal", "distal")  # redo one end, then back to guided
 MODE_LABELS: dict[str, str] = {
+    "guided": "Guided (ends, then landmarks)",
     "proximal": "Segment proximal end",
     "waypoint": "Waypoint",
     "distal": "Segment distal end",
-    "feature": "Feature pair (A then B)",
+    "feature": "Landmark pair (A and B)",
 }
+KIND_WORDS = {"proximal": "proximal end", "distal": "distal end", "feature": "landmark",
+              "waypoint": "waypoint"}
 VIEWS: tuple[str, str] = ("a", "b")
 
 # A snapper takes (view, raw click (2,)) and returns (placed point (2,), snap distance in
@@ -175,7 +186,7 @@ class MarkState:
         self.view_b_nominal = view_b
         self.view_b_calibrated: ViewGeometry | None = None
         self.snapper = snapper
-        self.mode: str = "proximal"
+        self.mode: str = "guided"
         self.marks: list[Mark] = []
         self.segment_names: list[str] = ["Segment 1"]
         self.current_segment: int = 0
@@ -184,6 +195,7 @@ class MarkState:
         self._history: list[tuple] = []
         self.last_message: str | None = None
         self.last_epipolar_ms: float = 0.0
+        self._guide_id: int | None = None  # mark whose epipolar line guides the next click
 
     # ------------------------------------------------------------ geometry
     @property
@@ -216,6 +228,7 @@ class MarkState:
         """Revert the last change of the marks. Returns False if there was nothing to undo."""
         if not self._history:
             return False
+        self._guide_id = None
         (
             self.marks,
             self.segment_names,
@@ -277,7 +290,7 @@ class MarkState:
         raw = np.array([col, row], dtype=float)
         point, distance = self._place(view, raw)
         self._push()
-        kind = self.mode
+        kind = self.mode if self.mode != "guided" else self.guided_kind(view)
         if kind == "feature":
             group = self._feature_group_for(view)
         else:
@@ -300,7 +313,66 @@ class MarkState:
         self._next_id += 1
         self.marks.append(mark)
         self.selected_id = mark.id
+        if self.mode in ONE_SHOT_MODES:
+            self.mode = "guided"
+        self._guide_id = self._guide_after(mark) if self.mode == "guided" else None
         return mark
+
+    # ------------------------------------------------------------ guided workflow
+    def _has(self, kind: str, view: str, group: int) -> bool:
+        return any(m.kind == kind and m.view == view and m.group == group for m in self.marks)
+
+    def guided_kind(self, view: str) -> str:
+        """What a guided click in ``view`` places: the current segment's proximal end,
+        then its distal end, then a landmark."""
+        for end in ("proximal", "distal"):
+            if not self._has(end, _check_view(view), self.current_segment):
+                return end
+        return "feature"
+
+    def _guide_after(self, mark: Mark) -> int | None:
+        """The mark whose epipolar line shows where the next click in the other view
+        belongs: the partner-to-be of what that click will place."""
+        other = _other(mark.view)
+        kind = self.guided_kind(other)
+        if kind == "feature":
+            group = self._feature_group_for(other)
+            cand = [m for m in self.marks if m.kind == "feature" and m.group == group
+                    and m.view == mark.view]
+        else:
+            cand = [m for m in self.marks if m.kind == kind and m.group == self.current_segment
+                    and m.view == mark.view]
+        return cand[-1].id if cand else mark.id
+
+    def next_clicks(self) -> dict[str, str]:
+        """What the next click in each view places, in words ({"a": "distal end", ...})."""
+        if self.mode == "guided":
+            return {v: KIND_WORDS[self.guided_kind(v)] for v in VIEWS}
+        return {v: KIND_WORDS[self.mode] for v in VIEWS}
+
+    def guide_text(self) -> str:
+        """One line for the page: what to click next in A and in B, and whether the
+        current segment is ready to reconstruct."""
+        nxt = self.next_clicks()
+        ends_done = all(self._has(e, v, self.current_segment)
+                        for e in ("proximal", "distal") for v in VIEWS)
+        pending = [m for m in self.marks if m.kind == "feature"
+                   and self.partner(m) is None]
+        text = f"Next click in **A**: {nxt['a']} · in **B**: {nxt['b']}."
+        guide = self.mark_by_id(self._guide_id)
+        if guide is not None and self.partner(guide) is None:
+            text += (f" The magenta line in {_other(guide.view).upper()} shows where "
+                     f"{self.label(guide)} lies there.")
+        if pending:
+            p = pending[-1]
+            text += (f" Landmark {p.group + 1} waits for its partner in "
+                     f"{_other(p.view).upper()} (on the magenta line).")
+        if ends_done:
+            n = len(self.to_seeds().features)
+            text += (f" ✔ Segment ready: press **Reconstruct**. {n} landmark pair(s): "
+                     "branch points seen in both views make the calibration firmer "
+                     f"({2 + n} of 5 correspondences).")
+        return text
 
     def _feature_group_for(self, view: str) -> int:
         """Feature index a click in ``view`` goes to: the pending partner, or a new one."""
@@ -322,6 +394,7 @@ class MarkState:
         if mark_id is not None and self.mark_by_id(mark_id) is None:
             raise ValueError(f"no mark with id {mark_id}")
         self.selected_id = mark_id
+        self._guide_id = None
 
     def mark_by_id(self, mark_id: int | None) -> Mark | None:
         for m in self.marks:
@@ -360,7 +433,8 @@ class MarkState:
 
     # ------------------------------------------------------------ epipolar
     def epipolar_segment(self, mark: Mark | None = None) -> tuple[str, FloatArray] | None:
-        """Epipolar line of a mark (default: the selected one), drawn in the other view.
+        """Epipolar line of a mark (default: the one guiding the next click after a guided
+        click, else the selected one), drawn in the other view.
 
         Returns (view the line is drawn in, (2, 2) end points (col, row) clipped
         to that image), or None when nothing is selected or the line misses the
@@ -368,7 +442,8 @@ class MarkState:
         :func:`recon.geometry.epipolar_lines`).
         """
         t0 = time.perf_counter()
-        mark = mark if mark is not None else self.selected
+        if mark is None:
+            mark = self.mark_by_id(self._guide_id) or self.selected
         if mark is None:
             return None
         src, dst = self.geometry(mark.view), self.geometry(_other(mark.view))

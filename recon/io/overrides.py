@@ -26,6 +26,10 @@ __all__ = [
     "GeometryOverrides",
     "read_geometry_json",
     "overrides_from_dict",
+    "per_file_overrides",
+    "header_replacements",
+    "overrides_from_entries",
+    "ENTRY_KEYS",
     "spacing_pair",
 ]
 
@@ -140,3 +144,62 @@ def spacing_pair(value: object) -> tuple[float, float] | None:
     if arr.size != 2 or not np.all(np.isfinite(arr)) or not np.all(arr > 0):
         return None
     return (float(arr[0]), float(arr[1]))
+
+
+def per_file_overrides(
+    common: GeometryOverrides | None, per_file: str | os.PathLike | None
+) -> GeometryOverrides | None:
+    """One file's overrides: its own geometry JSON (``--geometry-a`` / ``--geometry-b``)
+    with the values given for every file (``--sid-mm`` ...) filling what it leaves out."""
+    own = GeometryOverrides.from_json(per_file) if per_file is not None else None
+    if own is None:
+        return common
+    return own.merged_over(common)
+
+
+def header_replacements(geometry_notes: tuple[str, ...] | list[str]) -> list[str]:
+    """The geometry notes of a file (``Angiogram.geometry_notes``) that say a value the
+    header has was replaced by a user's value: each must reach the user as a warning."""
+    return [n for n in geometry_notes if "(header says" in n]
+
+
+# The values a user types for a file that lacks them (the viewer's Geometry folder).
+ENTRY_KEYS = ("sid_mm", "sod_mm", "pixel_spacing_mm")
+_ENTRY_WORDS = {"sid_mm": "SID", "sod_mm": "SOD", "pixel_spacing_mm": "pixel spacing",
+                "alpha_deg": "primary angle", "beta_deg": "secondary angle"}
+
+
+def overrides_from_entries(
+    entries: dict[str, str], header: dict[str, Any], source: str
+) -> tuple[GeometryOverrides | None, list[str]]:
+    """Overrides from typed values (key -> text; "" keeps the header's value).
+
+    ``header`` holds the file's own values (key -> number, (row, col) or None, as
+    :func:`recon.io.describe.describe_file` reports them). A typed value equal to the
+    header's is not an override; one that differs replaces it and is named in the
+    returned messages ("SID 1000 mm replaces the header's 976 mm"). Raises LoadError
+    naming ``source`` and the value for text that is not a number in range.
+    """
+    kwargs: dict[str, Any] = {}
+    replaced: list[str] = []
+    for key, text in entries.items():
+        text = str(text).strip()
+        if key not in GEOMETRY_KEYS:
+            raise LoadError(f"{source}: unknown geometry value {key!r}")
+        if not text:
+            continue
+        try:
+            number = float(text)
+        except ValueError:
+            raise LoadError(f"{source}: {_ENTRY_WORDS[key]} {text!r} is not a number") from None
+        value: Any = (number, number) if key == "pixel_spacing_mm" else number
+        own = header.get(key)
+        if own is not None and np.allclose(np.asarray(own, float), np.asarray(value, float)):
+            continue
+        kwargs[key] = value
+        if own is not None:
+            shown = "/".join(f"{v:g}" for v in np.asarray(own, float).reshape(-1)[:1])
+            replaced.append(f"{_ENTRY_WORDS[key]} {number:g} replaces the header's {shown}")
+    if not kwargs:
+        return None, []
+    return GeometryOverrides(**kwargs, source=source), replaced

@@ -3,6 +3,7 @@
 import csv
 import io
 import json
+import re
 import shutil
 
 import numpy as np
@@ -166,3 +167,35 @@ def test_view_port_0_asks_for_any_free_port_and_out_of_range_ports_are_refused()
     for bad in ("-1", "65536"):
         proc = run_cli("view", "--port", bad)
         assert_one_line_error(proc, "--port")
+
+
+def test_reconstruct_geometry_per_file_and_a_replaced_header_value_is_said(tmp_path):
+    geo_b = tmp_path / "b-geometry.json"
+    geo_b.write_text(json.dumps({"sid_mm": 990}))
+    out = tmp_path / "out"
+    proc = run_cli("reconstruct", "--demo", "--geometry-b", str(geo_b), "--out", str(out),
+                   "--quiet")
+    assert proc.returncode == 0, proc.stderr
+    warnings = [ln for ln in proc.stderr.splitlines() if "warning" in ln and "header says" in ln]
+    assert len(warnings) == 1 and "b.dcm" in warnings[0] and "990" in warnings[0], proc.stderr
+    report = json.loads((out / "report.json").read_text())
+    text = json.dumps(report)
+    assert "990" in text  # view B used the file's JSON ...
+    assert "a.dcm: " not in proc.stderr  # ... and view A kept its header
+
+
+def test_reconstruct_report_writes_a_one_page_pdf_without_patient_data(tmp_path):
+    out = tmp_path / "out"
+    a, b = str(DATA / "IM1.dcm"), str(DATA / "IM2.dcm")
+    proc = run_cli("reconstruct", a, b, "--seeds", str(DATA / "im1_im2_seeds.json"),
+                   "--out", str(out), "--report", "--quiet")
+    assert proc.returncode == 0, proc.stderr
+    pdf = (out / "report.pdf").read_bytes()
+    assert pdf.startswith(b"%PDF") and len(re.findall(rb"/Type\s*/Page[^s]", pdf)) == 1
+    report = json.loads((out / "report.json").read_text())
+    best = report["optimal_view"]
+    assert len(best["angles_deg"]) == 2 and 0.0 <= best["foreshortening_pct"] < 100.0
+    assert 0.0 <= best["overlap_pct"] <= 100.0
+    grid = best["grid"]
+    assert np.asarray(grid["foreshortening_pct"]).shape == (len(grid["beta_deg"]),
+                                                           len(grid["alpha_deg"]))

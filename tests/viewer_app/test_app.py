@@ -59,11 +59,14 @@ def test_clicks_snap_to_the_vessel_and_draw_the_epipolar_line(
         f"over {len(timings_ms)} clicks (server side)\n"
     )
 
-    # Far from any vessel: kept raw, and the user is told.
+    # Far from any vessel: kept raw, and the user is told in the marks panel (a toast
+    # would cover the left of image A, where the next click goes).
+    n_notes = len(app.notifications)
     corner = app.click("a", 2.0, 2.0)
     assert corner is not None and corner.snap_distance_px is None
     assert corner.point_px == corner.raw_px == (2.0, 2.0)
-    assert app.notifications[-1][0] == "warning"
+    assert len(app.notifications) == n_notes
+    assert "not snapped" in app.panels.marks.summary.content
 
     # Feature pair: A then B; undo removes the last click.
     app.set_mode("feature")
@@ -111,6 +114,20 @@ def test_reconstruct_then_export(app: ViewerApp) -> None:
     table = app.panels.results.markdown.content
     assert table.startswith("| measurement | value |") and "| Table 3 |" in table
     assert app.panels.results.plot.visible
+    m = rec.measurements
+    clinical = app.panels.results.clinical.content
+    assert f"| Minimal lumen diameter | **{m.mld_mm:.2f} mm** |" in clinical
+    assert f"| % diameter stenosis | **{m.diameter_stenosis_pct:.0f} %** |" in clinical
+    assert "Table 3" not in clinical and "ms" not in clinical  # engineering folded away
+    # Moving the lesion ends: the measurements, chart and marks follow.
+    start, end = m.lesion_start_s_mm - 3.0, m.lesion_end_s_mm + 3.0
+    lesion = app.set_lesion(start, end)
+    assert lesion["lesion_length_mm"] == pytest.approx(end - start)
+    assert lesion["mld_mm"] == pytest.approx(
+        float(np.min(rec.profile.diameter_smooth_mm[(rec.profile.s_mm >= start)
+                                                    & (rec.profile.s_mm <= end)])))
+    assert "set by hand" in app.panels.results.clinical.content
+    assert f"{end - start:.1f} mm" in app.panels.results.clinical.content
 
     stl = app.export("stl")
     mesh = trimesh.load(io.BytesIO(stl), file_type="stl")
@@ -215,11 +232,32 @@ def test_cine_frame_slider_and_missing_geometry(tmp_path: Path) -> None:
         slider.value = 1  # as if the user dragged it
         assert app.views["a"].angio.frame_index == 1
         assert not np.array_equal(app.views["a"].nodes.image.image, before)
-        # A real clinical cine without SID/SOD/spacing: an error notification, the app lives on.
+        # A real clinical cine without SID/SOD/spacing: an error notification, the app lives on,
+        # and the Geometry folder asks for the three values (IM8's prefilled from its header).
         assert app.open_pair(str(data / "rca-cine-ecg.dcm"), str(data / "IM8.dcm")) is False
         level, _, body = app.notifications[-1]
         assert level == "error" and "DistanceSourceToDetector" in body
+        assert "enter it under Geometry" in body and "--sid-mm" not in body
         assert app.views["a"].angio.path.endswith("IM7.dcm")
+        entries = app.panels.geometry.entries()
+        assert entries["a"] == {"sid_mm": "", "sod_mm": "", "pixel_spacing_mm": ""}
+        im8 = app.views["b"].angio.geometry
+        assert float(entries["b"]["sid_mm"]) == pytest.approx(im8.sid_mm)
+        entries["a"] = {"sid_mm": "1000", "sod_mm": "750", "pixel_spacing_mm": "0.3"}
+        n_notes = len(app.notifications)
+        assert app.apply_geometry(entries)
+        a, b = app.views["a"].angio, app.views["b"].angio
+        assert a.path.endswith("rca-cine-ecg.dcm") and a.geometry.sid_mm == 1000.0
+        assert a.geometry.sod_mm == 750.0 and a.geometry.pixel_spacing_mm == (0.3, 0.3)
+        assert b.geometry.sid_mm == pytest.approx(im8.sid_mm)  # IM8's own header, untouched
+        assert not [n for n in app.notifications[n_notes:] if n[0] == "warning"]
+        # A typed value that differs from a header's replaces it, and says so.
+        entries = app.panels.geometry.entries()
+        entries["b"]["sid_mm"] = f"{im8.sid_mm + 100:g}"
+        assert app.apply_geometry(entries)
+        assert app.views["b"].angio.geometry.sid_mm == pytest.approx(im8.sid_mm + 100)
+        level, title, body = app.notifications[-1]
+        assert level == "warning" and "replaces the header's" in body and "IM8" in body
     finally:
         app.stop()
 

@@ -1,6 +1,8 @@
-"""The viewer in headless Chromium: page ready, click on image A, reconstruct, download.
+"""The viewer in headless Chromium with real mouse events: clicks land on the image they
+were made on in every order, a new pair shows no old marks, and a guided session from an
+empty page to a mesh (calibration figures, camera layouts, reload, download).
 
-One fat test (the first WebGL render costs seconds on a small machine).
+Few fat tests (the first WebGL render costs seconds on a small machine).
 Screenshots go to test-artifacts/viewer/. Needs /usr/bin/chromium and the
 ``playwright`` package (no ``playwright install``: the system Chromium is used).
 """
@@ -14,9 +16,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import trimesh
 
 from recon.io import load_seeds
-from viewer_app import ViewerApp
+from viewer_app import ViewerApp, scene
+from viewer_app.state import MODE_LABELS
 
 CHROMIUM = "/usr/bin/chromium"
 FLAGS = [
@@ -54,11 +58,27 @@ READY_JS = """
   const m = window.__viserMutable;
   if (!m || !m.nodeRefFromName) return false;
   if (document.body.innerText.includes("Connecting")) return false;
-  return ["/view_a", "/view_b", "/view_a/marks"].every((n) => {
+  return ["/view_a", "/view_b", "/over_a/marks"].every((n) => {
     const r = m.nodeRefFromName[n];
     return r && (r.current !== undefined ? r.current : r);
   });
 }
+"""
+
+
+DISMISS_JS = """
+() => {  // close the 'Software WebGL rendering' toast (a GPU-less machine only)
+  for (const n of document.querySelectorAll('.mantine-Notification-root')) {
+    if (n.innerText.includes('Software WebGL')) {
+      const b = n.querySelector('button'); if (b) b.click();
+    }
+  }
+}
+"""
+
+MARK_LABELS_JS = """
+() => Object.keys(window.__viserMutable.nodeRefFromName)  // scene nodes of the mark labels
+  .filter((n) => /[/]labels[/]m[0-9]+$/.test(n))
 """
 
 
@@ -71,76 +91,317 @@ def _wait(predicate, timeout_s: float, what: str) -> None:
     raise AssertionError(f"timed out after {timeout_s:.0f} s waiting for {what}")
 
 
-@pytest.mark.skipif(not Path(CHROMIUM).is_file(), reason=f"no browser at {CHROMIUM}")
-def test_clinician_session_in_chromium(
-    app: ViewerApp, demo_case: dict[str, Path], tmp_path: Path, artifacts_dir: Path
-) -> None:
-    sync_api = pytest.importorskip("playwright.sync_api", reason="playwright is not installed")
-    out = artifacts_dir
-    app.clear()
-    with sync_api.sync_playwright() as pw:
-        ctx = pw.chromium.launch_persistent_context(
-            str(tmp_path / "chromium-profile"),
-            executable_path=CHROMIUM,
-            args=FLAGS,
-            headless=True,
-            viewport={"width": 1400, "height": 900},
-            accept_downloads=True,
-        )
+class Browser:
+    """One Chromium (Playwright) with a page on a viewer; clicks are real mouse events."""
+
+    def __init__(self, pw: object, profile: Path, out: Path) -> None:
+        self.ctx = pw.chromium.launch_persistent_context(
+            str(profile), executable_path=CHROMIUM, args=FLAGS, headless=True,
+            viewport={"width": 1400, "height": 900}, accept_downloads=True)
+        self.page = self.ctx.new_page()
+        self.out = out
+        self.shots: list[str] = []
+
+    def open(self, app: ViewerApp) -> None:
+        self.app = app
+        self.page.goto(app.url)
+        self.settle()
+
+    def reload(self) -> None:
+        self.page.reload()
+        self.settle()
+
+    def settle(self) -> None:
+        self.page.wait_for_function(READY_JS, timeout=30_000)
+        self.page.wait_for_timeout(1500)  # nodes fade in, the canvas takes its size
+        self.page.evaluate(DISMISS_JS)
+        self.page.wait_for_timeout(300)
+
+    def shot(self, name: str) -> None:
+        self.page.wait_for_timeout(400)
+        self.page.screenshot(path=str(self.out / name))
+        self.shots.append(name)
+
+    def screen_xy(self, view: str, col: float, row: float) -> tuple[float, float]:
+        local = self.app.views[view].local_from_px(np.array([[col, row]]), z=0.0)[0]
+        x, y = self.page.evaluate(PROJECT_JS, [f"/view_{view}", *map(float, local)])
+        return float(x), float(y)
+
+    def click(self, view: str, col: float, row: float) -> tuple[object, list]:
+        """Click pixel (col, row) of image ``view``; returns (the new mark or None, the
+        notifications it raised)."""
+        app = self.app
+        x, y = self.screen_xy(view, col, row)
+        n_marks, n_notes = app.state._next_id, len(app.notifications)
+        self.page.mouse.click(x, y)
         try:
-            page = ctx.new_page()
-            t0 = time.perf_counter()
-            page.goto(app.url)
-            page.wait_for_function(READY_JS, timeout=30_000)
-            ready_s = time.perf_counter() - t0
-            page.wait_for_timeout(1500)  # let the nodes fade in before the screenshot
-            (out / "page_ready_s.txt").write_text(f"{ready_s:.2f}\n")
-            page.screenshot(path=str(out / "1_ready.png"))
-            assert ready_s < 30.0
+            _wait(lambda: app.state._next_id > n_marks or len(app.notifications) > n_notes, 15,
+                  f"the click on {view.upper()} ({col:.0f}, {row:.0f}) at screen "
+                  f"({x:.0f}, {y:.0f}) to reach the server")
+        except AssertionError:
+            self.page.screenshot(path=str(self.out / "click_not_received.png"))
+            raise
+        new = [m for m in app.state.marks if m.id >= n_marks]
+        return (new[-1] if new else None), app.notifications[n_notes:]
 
-            # Click on image A at a known pixel: a mark appears, snapped or raw,
-            # with the epipolar line in B.
-            va = app.views["a"]
-            col, row = load_seeds(demo_case["seeds"]).segments[0].a_px[0]
-            local = va.local_from_px(np.array([[col, row]]), z=0.0)[0]
-            app.set_mode("proximal")
-            n_before = len(app.state.marks)
-            x, y = page.evaluate(PROJECT_JS, ["/view_a", *map(float, local)])
-            page.mouse.click(x, y)
-            _wait(lambda: len(app.state.marks) > n_before, 10, "the click to reach the server")
-            mark = app.state.marks[-1]
-            assert mark.view == "a" and mark.kind == "proximal"
-            assert np.hypot(mark.raw_px[0] - col, mark.raw_px[1] - row) < 2.0
-            assert app.epipolar_segments["b"] is not None
-            page.wait_for_timeout(500)
-            page.screenshot(path=str(out / "2_click.png"))
+    def choose(self, label: str, option: str) -> None:
+        """Pick ``option`` in the dropdown labelled ``label`` (mouse clicks)."""
+        self.page.get_by_label(label, exact=True).click()
+        self.page.get_by_role("option", name=option, exact=True).click()
 
-            # Reconstruct from the GUI button on the demo seeds.
-            app.load_seeds(demo_case["seeds"])
-            page.get_by_role("button", name="Reconstruct").click()
-            _wait(lambda: app.reconstruction is not None or _failed(app), 180, "reconstruction")
-            assert app.reconstruction is not None, app.notifications[-3:]
-            page.wait_for_timeout(1500)
-            page.screenshot(path=str(out / "3_reconstructed.png"))
-            page.get_by_role("button", name="Camera: images + model").click()
-            page.wait_for_timeout(1500)
-            page.screenshot(path=str(out / "4_all.png"))
-            page.get_by_text("Diameter along the vessel").scroll_into_view_if_needed()
-            page.wait_for_timeout(500)
-            page.screenshot(path=str(out / "5_results_panel.png"))
+    def dropdown_value(self, label: str) -> str:
+        return self.page.get_by_label(label, exact=True).input_value()
 
-            # A download reaches the browser.
-            with page.expect_download(timeout=30_000) as info:
-                page.get_by_role("button", name="Download report.json").click()
-            dl = info.value
-            assert dl.suggested_filename == "report.json"
-            saved = tmp_path / "report.json"
-            dl.save_as(saved)
-            report = json.loads(saved.read_text())
-            assert report["centerline"]["length_mm"] > 0
+    def close(self) -> None:
+        self.ctx.close()
+
+
+def _assert_lands(b: Browser, view: str, col: float, row: float, where: str) -> None:
+    mark, notes = b.click(view, col, row)
+    assert mark is not None, f"{where}: click on {view.upper()} ({col:.0f}, {row:.0f}) " \
+        f"refused: {notes}"
+    assert mark.view == view, f"{where}: click on {view.upper()} landed on {mark.view.upper()}"
+    assert np.hypot(mark.raw_px[0] - col, mark.raw_px[1] - row) < 1.5, (
+        f"{where}: click on {view.upper()} ({col:.1f}, {row:.1f}) arrived at {mark.raw_px}")
+
+
+GRID = [(c, r) for c in np.linspace(40, 470, 5) for r in np.linspace(60, 470, 3)]
+
+
+@pytest.mark.skipif(not Path(CHROMIUM).is_file(), reason=f"no browser at {CHROMIUM}")
+def test_every_click_lands_on_the_image_it_was_made_on(
+    demo_case: dict[str, Path], tmp_path: Path, artifacts_dir: Path
+) -> None:
+    """The issue-16 defect: once B held a mark, clicks on A were caught by it (and vice
+    versa). Every order: A then B, B then A, interleaved, after a reload, after a server
+    restart; and the Mode dropdown shows the restored mode after the restart."""
+    sync_api = pytest.importorskip("playwright.sync_api", reason="playwright is not installed")
+    autosave = tmp_path / "autosave.json"
+    files = (str(demo_case["a"]), str(demo_case["b"]))
+
+    def start() -> ViewerApp:
+        viewer = ViewerApp(*files, None, port=0, autosave_path=autosave)
+        viewer.wait_ready()
+        return viewer
+
+    app = start()
+    with sync_api.sync_playwright() as pw:
+        b = Browser(pw, tmp_path / "profile", artifacts_dir)
+        try:
+            b.open(app)
+            b.shot("clicks_0_empty.png")
+            # The issue's case: one mark in B at (128, 383), then clicks all over A.
+            _assert_lands(b, "b", 128, 383, "B first")
+            app.set_mode("waypoint")  # any number of marks per view
+            for col, row in GRID:
+                _assert_lands(b, "a", col, row, "A after a mark in B")
+            # ... and an A mark at (480, 400), then clicks all over B.
+            _assert_lands(b, "a", 480, 400, "A")
+            for col, row in GRID:
+                _assert_lands(b, "b", col, row, "B after marks in A")
+            b.shot("clicks_1_a_then_b.png")
+            for (ca, ra), (cb, rb) in zip(GRID[::2], GRID[1::2], strict=False):
+                _assert_lands(b, "a", ca, ra, "interleaved")
+                _assert_lands(b, "b", cb, rb, "interleaved")
+            b.reload()
+            for col, row in GRID[:4]:
+                _assert_lands(b, "b", col, row, "after a reload")
+                _assert_lands(b, "a", row, col, "after a reload")
+            b.shot("clicks_2_after_reload.png")
+
+            # A server restart: the autosave restores the marks and the mode, and the
+            # page's Mode dropdown says so (it said "Segment proximal end" before).
+            app.set_mode("feature")
+            _assert_lands(b, "a", 300, 300, "before the restart")
+            n_marks = len(app.state.marks)
+            app.stop()
+            app = start()
+            assert len(app.state.marks) == n_marks and app.state.mode == "feature"
+            b.open(app)
+            assert b.dropdown_value("Mode") == MODE_LABELS["feature"]
+            mark, _ = b.click("b", 320, 310)
+            assert mark is not None and mark.kind == "feature" and mark.view == "b"
+            for col, row in GRID[-4:]:
+                _assert_lands(b, "a", col, row, "after a restart")
+                _assert_lands(b, "b", row, col, "after a restart")
+            # The mode picked in the page is the one used.
+            b.choose("Mode", MODE_LABELS["waypoint"])
+            _wait(lambda: app.state.mode == "waypoint", 10, "the mode to reach the server")
+            mark, _ = b.click("a", 250, 250)
+            assert mark is not None and mark.kind == "waypoint"
+            b.shot("clicks_3_after_restart.png")
         finally:
-            ctx.close()
-    shutil.rmtree(tmp_path / "chromium-profile", ignore_errors=True)
+            b.close()
+            app.stop()
+
+
+@pytest.mark.skipif(not Path(CHROMIUM).is_file(), reason=f"no browser at {CHROMIUM}")
+def test_a_new_pair_shows_no_old_marks(
+    demo_case: dict[str, Path], tmp_path: Path, artifacts_dir: Path
+) -> None:
+    """Opening another pair used to leave the old mark labels drawn (panel: 0 marks)."""
+    sync_api = pytest.importorskip("playwright.sync_api", reason="playwright is not installed")
+    app = ViewerApp(str(demo_case["a"]), str(demo_case["b"]), str(demo_case["seeds"]),
+                    port=0, autosave_path=tmp_path / "autosave.json")
+    with sync_api.sync_playwright() as pw:
+        b = Browser(pw, tmp_path / "profile", artifacts_dir)
+        try:
+            b.open(app)
+            assert len(b.page.evaluate(MARK_LABELS_JS)) == len(app.state.marks) > 0
+            other = tmp_path / "other"
+            other.mkdir()
+            pa, pb = other / "a.dcm", other / "b.dcm"  # the same images under other names
+            shutil.copy(demo_case["b"], pa)
+            shutil.copy(demo_case["a"], pb)
+            assert app.open_pair(str(pa), str(pb))
+            assert app.state.marks == []
+            b.page.wait_for_timeout(1500)
+            b.shot("new_pair_no_old_marks.png")
+            # The scene the server sends to a page holds no label of the old marks (a
+            # live page keeps stale names in its lookup table, so reload to ask).
+            b.reload()
+            assert b.page.evaluate(MARK_LABELS_JS) == []
+        finally:
+            b.close()
+            app.stop()
+
+
+@pytest.mark.skipif(not Path(CHROMIUM).is_file(), reason=f"no browser at {CHROMIUM}")
+def test_guided_session_from_an_empty_page_to_a_mesh(
+    demo_case: dict[str, Path], tmp_path: Path, artifacts_dir: Path
+) -> None:
+    """From the demo page with no marks to a mesh in at most 8 clicks on the images plus
+    button presses; Calibrate and Reconstruct agree; the camera never tilts the
+    angiograms; a reload shows the model whole; a download reaches the browser."""
+    sync_api = pytest.importorskip("playwright.sync_api", reason="playwright is not installed")
+    seeds = load_seeds(demo_case["seeds"])
+    seg, feat = seeds.segments[0], seeds.features[0]
+    app = ViewerApp(str(demo_case["a"]), str(demo_case["b"]), None, port=0,
+                    autosave_path=tmp_path / "autosave.json")
+    app.wait_ready()
+    image_clicks = 0
+    with sync_api.sync_playwright() as pw:
+        b = Browser(pw, tmp_path / "profile", artifacts_dir)
+        try:
+            t0 = time.perf_counter()
+            b.open(app)
+            (artifacts_dir / "page_ready_s.txt").write_text(f"{time.perf_counter() - t0:.2f}\n")
+            assert app.state.marks == [] and b.dropdown_value("Mode") == MODE_LABELS["guided"]
+            b.shot("guided_0_empty.png")
+            # The guided order: both ends in A, both in B, then one landmark pair; the mode
+            # advances by itself (no mode change between the clicks).
+            steps = [("a", seg.a_px[0], "proximal"), ("a", seg.a_px[-1], "distal"),
+                     ("b", seg.b_px[0], "proximal"), ("b", seg.b_px[-1], "distal"),
+                     ("a", feat.a_px, "feature"), ("b", feat.b_px, "feature")]
+            for i, (view, (col, row), kind) in enumerate(steps, start=1):
+                mark, notes = b.click(view, col, row)
+                image_clicks += 1
+                assert mark is not None and (mark.view, mark.kind) == (view, kind), notes
+                if i in (1, 2, 5):  # the next click in the other view has a guide line
+                    nxt = steps[i] if i == 5 else steps[2 if i == 2 else 2]
+                    epi = app.epipolar_segments["b"]
+                    assert epi is not None
+                    if i == 2:  # the line drawn in B passes the proximal end B is to get
+                        d, w = epi[1] - epi[0], np.asarray(nxt[1]) - epi[0]
+                        assert abs(d[0] * w[1] - d[1] * w[0]) / np.linalg.norm(d) < 15.0
+                b.shot(f"guided_{i}_{view}_{kind}.png")
+            assert b.dropdown_value("Mode") == MODE_LABELS["guided"]
+            assert "Segment ready" in app.panels.marks.guide.content
+
+            # Calibrate, then Reconstruct: the same figures for the same marks.
+            b.page.get_by_role("button", name="Calibrate (PALM)").click()
+            _wait(lambda: app.calibration is not None or _failed(app), 120, "calibration")
+            assert app.calibration is not None, app.notifications[-3:]
+            def errors() -> list[str]:  # the before / after rows of the calibration table
+                return [r for r in app.panels.calibrate.markdown.content.splitlines()
+                        if r.startswith("| error")]
+
+            calibrated = errors()
+            assert len(calibrated) == 2
+            b.page.get_by_role("button", name="Reconstruct", exact=True).click()
+            _wait(lambda: app.reconstruction is not None or _failed(app), 180, "reconstruction")
+            rec = app.reconstruction
+            assert rec is not None, app.notifications[-3:]
+            assert errors() == calibrated, (calibrated, errors())
+            assert image_clicks <= 8
+            mesh = trimesh.Trimesh(rec.surface.mesh.vertices, rec.surface.mesh.faces)
+            assert mesh.is_watertight and mesh.volume > 0
+            (artifacts_dir / "clicks_to_mesh.txt").write_text(
+                f"{image_clicks} clicks on the images + 2 button presses (Calibrate, "
+                f"Reconstruct; Calibrate is optional)\n")
+            b.page.wait_for_timeout(1500)
+            b.shot("guided_7_reconstructed.png")
+            assert app.layout == "Angiograms + 3D"
+
+            # Dragging rotates the model, never the angiograms: the page turns to the
+            # model alone, and "Angiograms + 3D" brings the straight view back.
+            cx, cy = b.screen_xy("a", 256, 256)
+            b.page.mouse.move(cx, cy)
+            b.page.mouse.down()
+            b.page.mouse.move(cx + 160, cy + 40, steps=12)
+            b.page.mouse.up()
+            _wait(lambda: app.layout == "3D model", 10, "the page to turn to the 3D model")
+            assert not app.views["a"].nodes.image.visible
+            b.page.wait_for_timeout(800)
+            b.shot("guided_8_model_rotated.png")
+            b.choose("Show", "Angiograms + 3D")
+            _wait(lambda: app.layout == "Angiograms + 3D", 10, "the layout")
+            b.page.wait_for_timeout(800)
+            client = next(iter(app.server.get_clients().values()))
+            _wait(lambda: scene.camera_rotated_deg(client) < 0.5, 10, "a straight camera")
+            assert app.views["a"].nodes.image.visible
+
+            # After a reload the model is whole on the screen.
+            b.reload()
+            box = _screen_box(b, "/model/mesh")
+            canvas = b.page.evaluate(CANVAS_JS)
+            assert box[0] >= 0 and box[1] >= 0 and box[2] <= canvas[0] and box[3] <= canvas[1], (
+                box, canvas)
+            b.shot("guided_9_after_reload.png")
+            b.page.get_by_text("Lesion end (mm)").scroll_into_view_if_needed()
+            b.shot("guided_10_results_panel.png")
+
+            with b.page.expect_download(timeout=30_000) as info:
+                b.page.get_by_role("button", name="Download report.json").click()
+            saved = tmp_path / "report.json"
+            info.value.save_as(saved)
+            assert json.loads(saved.read_text())["centerline"]["length_mm"] > 0
+        finally:
+            b.close()
+            app.stop()
+
+
+CANVAS_JS = """
+() => { const m = window.__viserMutable; const c = m.canvas.current ?? m.canvas;
+        const r = c.getBoundingClientRect(); return [r.right, r.bottom]; }
+"""
+
+BOX_JS = """
+(name) => {
+  const m = window.__viserMutable;
+  const ref = m.nodeRefFromName[name];
+  const node = ref && ref.current !== undefined ? ref.current : ref;
+  const cam = m.camera.current ?? m.camera;
+  const canvas = m.canvas.current ?? m.canvas;
+  node.updateWorldMatrix(true, true);
+  const r = canvas.getBoundingClientRect();
+  const xs = [], ys = [];
+  node.traverse((o) => {
+    if (!o.geometry || !o.geometry.attributes.position) return;
+    const p = o.geometry.attributes.position;
+    for (let i = 0; i < p.count; i += 7) {
+      const v = new node.position.constructor(p.getX(i), p.getY(i), p.getZ(i))
+        .applyMatrix4(o.matrixWorld).project(cam);
+      xs.push(r.left + (v.x + 1) / 2 * r.width); ys.push(r.top + (1 - v.y) / 2 * r.height);
+    }
+  });
+  return [Math.min(...xs), Math.min(...ys), Math.max(...xs), Math.max(...ys)];
+}
+"""
+
+
+def _screen_box(b: Browser, name: str) -> list[float]:
+    return b.page.evaluate(BOX_JS, name)
 
 
 def _failed(app: ViewerApp) -> bool:

@@ -5,6 +5,7 @@ from __future__ import annotations
 from types import SimpleNamespace
 
 import numpy as np
+import pytest
 
 from viewer_app.results import (
     NO_RECONSTRUCTION_TEXT,
@@ -13,6 +14,7 @@ from viewer_app.results import (
     calibration_markdown,
     fmt,
     info_markdown,
+    lesion_measurements,
     marks_markdown,
     results_markdown,
 )
@@ -85,7 +87,8 @@ def test_calibration_table() -> None:
     res = SimpleNamespace(
         rotvec=np.radians([0.0, 0.0, 1.5]), t_mm=np.array([3.0, 4.0, 0.0]),
         error_before_px=2.744, error_after_px=0.261, error_before_mm=1.07, error_after_mm=0.1,
-        iterations=5, elapsed_ms=7.4, warnings=("underdetermined",),
+        iterations=5, elapsed_ms=7.4,
+        warnings=("ill-conditioned", "underdetermined: 3 features constrain fewer than the 5"),
     )
     assert calibration_markdown(res) == "\n".join([
         "| | before | after |",
@@ -95,7 +98,10 @@ def test_calibration_table() -> None:
         "",
         "Pose correction of B: **1.50°** rotation, **5.00 mm** translation "
         "(3.00, 4.00, 0.00 mm); 5 iterations, 7 ms.",
-        "- ⚠ underdetermined",
+        "- ⚠ ill-conditioned",
+        "- ℹ 3 correspondences (the 2 segment ends + 1 landmark pair(s)): with 5 or more "
+        "the images alone fix view B's pose; with fewer the header's expected accuracy fills "
+        "in. Add 2 landmark pair(s) (branch points) to firm it up.",
     ])
     assert "Not calibrated" in NOT_CALIBRATED_TEXT and NO_RECONSTRUCTION_TEXT
 
@@ -128,3 +134,27 @@ def test_results_tables() -> None:
         "| trace | 12.3 |",
         "| total | 20000 |",
     ])
+
+
+def test_lesion_ends_set_by_hand() -> None:
+    s = np.linspace(0.0, 50.0, 501)
+    d = 3.0 - 0.02 * s - 1.5 * np.exp(-(((s - 25.0) / 3.0) ** 2))  # tapering, a lesion at 25
+    prof = SimpleNamespace(s_mm=s, diameter_smooth_mm=d)
+    v = lesion_measurements(prof, 15.0, 35.0)
+    assert v["lesion_length_mm"] == 20.0 and v["mld_s_mm"] == pytest.approx(25.0, abs=0.2)
+    assert v["mld_mm"] == pytest.approx(float(d.min()))
+    assert v["proximal_reference_mm"] == pytest.approx(3.0 - 0.3, abs=1e-3)
+    assert v["distal_reference_mm"] == pytest.approx(3.0 - 0.7, abs=1e-3)
+    ref = 3.0 - 0.02 * 25.0  # the straight reference at the MLD: the healthy taper
+    assert v["reference_diameter_mm"] == pytest.approx(ref, abs=5e-3)
+    assert v["diameter_stenosis_pct"] == pytest.approx(100 * 1.5 / ref, abs=0.5)
+    assert lesion_measurements(prof, 35.0, 15.0) == v  # the ends in either order
+
+
+def test_diameter_colour_scale() -> None:
+    from viewer_app.scene import diameter_colors
+
+    rgb = diameter_colors(np.array([1.0, 1.5, 3.0, 4.0]), 3.0)
+    assert rgb.dtype == np.uint8 and rgb.shape == (4, 3)
+    assert tuple(rgb[0]) == (220, 30, 30)  # half the reference or less: red
+    assert tuple(rgb[2]) == tuple(rgb[3]) == (40, 180, 70)  # at the reference: green

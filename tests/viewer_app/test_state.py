@@ -50,8 +50,10 @@ def test_modes_build_segments_and_feature_pairs() -> None:
     st.click("a", 50, 60)
     st.set_mode("distal")
     st.click("a", 100, 120)
+    assert st.mode == "guided"  # an end mode is one click (a redo), then guided again
+    st.set_mode("distal")
     st.click("a", 101, 121)  # replaces the distal end in A
-    st.click("b", 90, 95)
+    st.click("b", 90, 95)  # guided: B has its proximal end, so this is its distal end
     st.set_mode("feature")
     st.click("a", 200, 210)  # landmark in A ...
     st.click("b", 220, 230)  # ... then its partner in B
@@ -68,9 +70,40 @@ def test_modes_build_segments_and_feature_pairs() -> None:
     assert {"P1", "D1", "W1.1", "W1.2", "F1", "F2"} <= labels
 
 
+@pytest.mark.parametrize("order", ["aabb", "bbaa", "abab", "baba", "abba"])
+def test_guided_clicks_place_ends_then_landmarks_in_any_order(order: str) -> None:
+    st = _state()
+    assert st.mode == "guided"
+    pts = {"a": [(10, 20), (100, 120), (200, 210)], "b": [(11, 21), (90, 95), (220, 230)]}
+    used = {"a": 0, "b": 0}
+    for view in order + "ab":  # both ends in each view, then one landmark pair
+        st.click(view, *pts[view][used[view]])
+        used[view] += 1
+        assert st.mode == "guided"
+    seeds = st.to_seeds()
+    assert seeds.segments == (Segment("Segment 1", ((10, 20), (100, 120)), ((11, 21), (90, 95))),)
+    assert seeds.features == (Feature("feature 1", (200, 210), (220, 230)),)
+    assert st.missing() == []
+
+
+def test_guided_epipolar_line_guides_the_next_click_in_the_other_view() -> None:
+    st = _state()
+    X = np.array([[5.0, -10.0, 20.0], [-20.0, 15.0, -10.0]])
+    pa, pb = VIEW_A.project(X), VIEW_B.project(X)
+    st.click("a", *pa[0])  # proximal A
+    st.click("a", *pa[1])  # distal A: the next click in B is its proximal end ...
+    view, seg = st.epipolar_segment()
+    d = seg[1] - seg[0]
+    w = pb[0] - seg[0]
+    assert view == "b"  # ... so the line drawn in B is the proximal end's
+    assert abs(d[0] * w[1] - d[1] * w[0]) / np.linalg.norm(d) < 1e-6
+    assert "proximal end" in st.guide_text()
+
+
 def test_undo_and_clear() -> None:
     st = _state()
     st.click("a", 10, 20)
+    st.set_mode("proximal")
     st.click("a", 15, 25)  # replaces the proximal end
     assert [m.point_px for m in st.marks] == [(15.0, 25.0)]
     assert st.undo()
