@@ -25,7 +25,13 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from recon import __version__
-from recon.calibration import CalibrationResult, calibrate, refine_with_matches
+from recon.calibration import (
+    CORRECTIONS,
+    CalibrationResult,
+    calibrate,
+    calibrate_supported,
+    refine_with_matches,
+)
 from recon.centerline import VesselnessMap, compute_vesselness, trace_segment
 from recon.consistency import ConsistencyResult, check_consistency
 from recon.errors import CoronaryError
@@ -37,6 +43,7 @@ from recon.seeds import Seeds
 from recon.surface import SurfaceResult, build_surface
 from recon.triangulation import build_centerline_3d, table3_metrics
 from recon.types import Angiogram, Centerline2D, Centerline3D, Matching
+from recon.uncertainty import observability
 
 __all__ = [
     "PipelineError",
@@ -48,6 +55,14 @@ __all__ = [
 ]
 
 Progress = Callable[[str, float], None]
+
+# ReconstructionOptions.calibration -> the corrections calibrate_supported may choose from
+CALIBRATION_CHOICES: dict[str, tuple[str, ...]] = {
+    "supported": tuple(CORRECTIONS),
+    "full": ("full",),
+    "header": ("header",),
+}
+
 
 class PipelineError(CoronaryError):
     """The inputs cannot be reconstructed (one line: what and why)."""
@@ -72,6 +87,9 @@ class ReconstructionOptions:
     voxel_mm : surface grid size (None: chosen from the vessel radius).
     allow_close_views : go on (with a warning) when the views' central rays are less
         than :data:`MIN_VIEW_SEPARATION_DEG` apart; refused otherwise.
+    calibration : how far view B moves from its header: "supported" (the correction
+        the clicks support, :func:`recon.calibration.calibrate_supported`), "full"
+        (all six rig parameters) or "header" (B stays at its header pose).
     """
 
     matcher: str = "match3"
@@ -83,6 +101,7 @@ class ReconstructionOptions:
     intensity_a: str = "auto"
     intensity_b: str = "auto"
     allow_close_views: bool = False
+    calibration: str = "supported"
 
 
 @dataclass(frozen=True, eq=False)
@@ -142,6 +161,11 @@ class Reconstruction:
                 "translation_mm": list(self.view_b.t_corr_mm),
                 "warnings": list(cal.warnings),
                 "steps": list(self.calibration_steps),
+                "correction": cal.correction,
+                "decision": cal.decision,
+                "observability": (
+                    observability(cal.posterior) if cal.posterior is not None else None
+                ),
             },
             "matching": {
                 "method": self.matching.method,
@@ -235,6 +259,9 @@ def reconstruct_pair(
     """
     options = options or ReconstructionOptions()
     seg = _segment(seeds, options.segment)
+    if options.calibration not in CALIBRATION_CHOICES:
+        raise PipelineError(f"unknown calibration {options.calibration!r} (use one of "
+                            f"{', '.join(CALIBRATION_CHOICES)})")
     view_a, view_b_header = angio_a.geometry, angio_b.geometry
     close_views = _check_separation(view_a, view_b_header, options.allow_close_views)
     timings: dict[str, float] = {}
@@ -261,7 +288,8 @@ def reconstruct_pair(
     # 2. Calibrate view B on the corresponding features (eq. 5, PALM).
     _notify(progress, "calibrating the geometry", 0.35)
     feat_a, feat_b = _features(seeds, options.segment, cl_a, cl_b)
-    cal = calibrate(view_a, view_b_header, feat_a, feat_b, method=options.optimizer)
+    cal = calibrate_supported(view_a, view_b_header, feat_a, feat_b, method=options.optimizer,
+                              candidates=CALIBRATION_CHOICES[options.calibration])
     steps = [_step("features", cal)]
     lap("calibrate")
 
