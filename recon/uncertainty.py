@@ -221,7 +221,7 @@ def pose_posterior(
         click_sigma_px=sigma,
         residual_dof=dof,
         n_features=model.n_features,
-        axes=named_axes(model.view_a, model.view_b),
+        axes=named_axes(*model.views(z_hat)),
     )
 
 
