@@ -20,7 +20,7 @@ from recon.errors import CoronaryError
 
 EXIT_USER_ERROR = 2
 
-BENCHES = ("centerline", "calibration", "matching", "reconstruct")
+BENCHES = ("centerline", "calibration", "matching", "reconstruct", "intervals")
 
 
 class _Parser(argparse.ArgumentParser):
@@ -504,9 +504,10 @@ def cmd_bench(args: argparse.Namespace) -> int:
             return EXIT_USER_ERROR
         extra["jitter"] = args.jitter
     if args.workers is not None:
-        if args.name != "reconstruct" or args.suite != "regular" or args.workers < 1:
+        if (args.name not in ("reconstruct", "intervals") or args.suite != "regular"
+                or args.workers < 1):
             print("coronary3d: error: --workers N (N >= 1) is for bench reconstruct "
-                  "(regular suite)", file=sys.stderr)
+                  "(regular suite) and bench intervals", file=sys.stderr)
             return EXIT_USER_ERROR
         extra["workers"] = args.workers
     result = module.run(cases=args.cases, seed=args.seed, **extra)

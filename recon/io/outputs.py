@@ -45,6 +45,8 @@ CENTERLINE_COLUMNS = (
     "area_mm2",
     "radius_a_mm",
     "radius_b_mm",
+    "radius_lo95_mm",
+    "radius_hi95_mm",
 )
 
 
@@ -70,9 +72,15 @@ def export_mesh(mesh: trimesh.Trimesh, fmt: str) -> bytes:
 
 
 def centerline_csv(rec: Reconstruction) -> bytes:
-    """centerline.csv: header line then one row per point, proximal to distal."""
+    """centerline.csv: header line then one row per point, proximal to distal.
+
+    radius_lo95_mm / radius_hi95_mm: the 95 % interval of radius_mm
+    (:mod:`recon.uncertainty`); nan when the reconstruction has no intervals."""
     cl = rec.centerline_3d
     area = rec.surface.sections.area_mm2
+    iv = getattr(rec, "intervals", None)
+    nan = np.full(len(cl.s_mm), np.nan)
+    lo, hi = (nan, nan) if iv is None else (iv.radius_lo_mm, iv.radius_hi_mm)
     table = np.column_stack(
         [
             cl.s_mm,
@@ -82,6 +90,8 @@ def centerline_csv(rec: Reconstruction) -> bytes:
             area,
             cl.radius_a_mm,
             cl.radius_b_mm,
+            lo,
+            hi,
         ]
     )
     buf = io.StringIO()
