@@ -20,7 +20,7 @@ from recon.errors import CoronaryError
 
 EXIT_USER_ERROR = 2
 
-BENCHES = ("centerline", "calibration", "matching", "reconstruct", "intervals")
+BENCHES = ("centerline", "calibration", "matching", "reconstruct", "intervals", "sections")
 
 
 class _Parser(argparse.ArgumentParser):
