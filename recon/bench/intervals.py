@@ -34,8 +34,9 @@ CASES = 200
 STENOSIS_RANGE_PCT = (30.0, 70.0)
 KEYS = ("mld_mm", "reference_diameter_mm", "diameter_stenosis_pct", "segment_length_mm")
 TARGET_COVERAGE = (0.90, 0.98)
-# The default pipeline, but a coarse surface grid: the measurements come from the
-# elliptic sections, not from the mesh, so only the (unused) mesh changes.
+# The default pipeline (calibration "full"), but a coarse surface grid: the
+# measurements come from the elliptic sections, not from the mesh, so only the
+# (unused) mesh changes.
 OPTIONS = ReconstructionOptions(voxel_mm=0.6)
 
 
