@@ -2,7 +2,7 @@
 
 For each phantom case (preset ``PRESET_CYCLE[k % 4]``, seed ``seed + k``, diameter
 stenosis drawn uniformly in :data:`STENOSIS_RANGE_PCT` from the case seed) the
-whole ``reconstruct_pair`` runs (default options: the supported calibration and
+whole ``reconstruct_pair`` runs (default options: the full calibration and
 its intervals, :mod:`recon.uncertainty`) and each figure's ``measurements_ci95``
 is checked against the phantom's truth:
 
