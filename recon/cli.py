@@ -191,6 +191,14 @@ def build_parser() -> argparse.ArgumentParser:
             "PixelIntensityRelationship tag when LIN/LOG, else estimated); default auto",
         )
     p.add_argument(
+        "--calibration",
+        choices=("full", "supported", "header"),
+        default="full",
+        help="how far view B moves from its header: full (all six rig parameters; default), "
+        "supported (only as far as the clicks support: header, rig translation or full) "
+        "or header (no correction)",
+    )
+    p.add_argument(
         "--allow-close-views",
         action="store_true",
         help="go on, with a warning, when the two views are less than 25 deg apart "
@@ -376,6 +384,7 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
         intensity_a=args.intensity_a,
         intensity_b=args.intensity_b,
         allow_close_views=args.allow_close_views,
+        calibration=args.calibration,
     )
     rec = reconstruct_pair(angio_a, angio_b, seeds, options, progress=progress)
     written = write_outputs(rec, Path(args.out), formats=formats, sr_sources=sr_sources)
