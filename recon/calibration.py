@@ -71,12 +71,15 @@ from recon.calibration_model import (
     solve_palm,
 )
 from recon.geometry import ViewGeometry, rotvec_from_rotation, view_separation_deg
+from recon.uncertainty import PosePosterior, log_evidence, pose_posterior
 
 __all__ = [
     "CalibrationError",
     "CalibrationPriors",
     "CalibrationResult",
     "calibrate",
+    "calibrate_supported",
+    "CORRECTIONS",
     "refine_with_matches",
     "backprojection_residuals_px",
     "METHODS",
@@ -119,6 +122,11 @@ class CalibrationResult:
         estimated, otherwise the input view A).
     residuals_px : (K, 2) back-projection distance of each feature in (A, B)
         after calibration.
+    correction : which parameters were moved from the header: "full" (all six of
+        the rig; :func:`calibrate`), or what :func:`calibrate_supported` chose.
+    posterior : the Laplace posterior of the correction (:func:`calibrate_supported`
+        only), see :mod:`recon.uncertainty`.
+    decision : the model comparison behind ``correction`` (JSON-ready), or None.
     """
 
     view_b: ViewGeometry
@@ -136,6 +144,9 @@ class CalibrationResult:
     warnings: tuple[str, ...] = ()
     view_a: ViewGeometry | None = None
     residuals_px: FloatArray = field(default_factory=lambda: np.zeros((0, 2)))
+    correction: str = "full"
+    posterior: PosePosterior | None = None
+    decision: dict | None = None
 
 
 # ------------------------------------------------------------- validation
@@ -297,15 +308,31 @@ def calibrate(
         messages.append(f"{method} did not converge in {max_iterations} iterations")
     if not np.all(np.isfinite(sol.z)):
         raise CalibrationError(f"{method} diverged (non-finite parameters); check the clicks")
+    return _result(model, sol.z, method, sol.iterations, sol.converged, w, labels, messages,
+                   start)
+
+
+def _result(
+    model: ResidualModel,
+    z: FloatArray,
+    method: str,
+    iterations: int,
+    converged: bool,
+    w: FloatArray,
+    labels: Sequence[str],
+    messages: list[str],
+    start: float,
+) -> CalibrationResult:
+    """The :class:`CalibrationResult` of internal parameters z (n,) of ``model``."""
     zero = np.zeros(model.n_params)
-    (dist_before, dist_after), (mm_before, mm_after) = model.distances(np.stack([zero, sol.z]))
+    (dist_before, dist_after), (mm_before, mm_after) = model.distances(np.stack([zero, z]))
     far = np.max(dist_after, axis=1) > LARGE_RESIDUAL_PX
     for i in np.flatnonzero(far & (w > 0))[:5]:
         messages.append(
             f"{labels[i]} is still {np.max(dist_after[i]):.1f} px off after calibration; "
             "check the click"
         )
-    rotvec, t_mm = model.pose(sol.z)
+    rotvec, t_mm = model.pose(z)
     rot_deg = float(np.rad2deg(np.linalg.norm(rotvec)))
     if rot_deg > ANNEAL_ROTATION_BOUND_DEG or float(np.linalg.norm(t_mm)) > 2 * (
         ANNEAL_TRANSLATION_BOUND_MM
@@ -314,21 +341,21 @@ def calibrate(
             f"implausible correction: {rot_deg:.1f} deg and {np.linalg.norm(t_mm):.1f} mm "
             "(header errors are expected below a few degrees and centimetres)"
         )
-    cal_a, cal_b = model.views(sol.z)
+    cal_a, cal_b = model.views(z)
     used = w > 0
     return CalibrationResult(
         view_b=cal_b,
         rotvec=rotvec,
         t_mm=t_mm,
         method=method,
-        iterations=sol.iterations,
+        iterations=iterations,
         elapsed_ms=(time.perf_counter() - start) * 1e3,
         error_before_px=float(np.mean(dist_before[used])),
         error_after_px=float(np.mean(dist_after[used])),
         error_before_mm=float(np.mean(mm_before[used])),
         error_after_mm=float(np.mean(mm_after[used])),
-        converged=sol.converged,
-        n_features=len(pa),
+        converged=converged,
+        n_features=model.n_features,
         warnings=tuple(messages),
         view_a=cal_a,
         residuals_px=dist_after,
@@ -355,6 +382,134 @@ def _initial_parameters(model: ResidualModel, initial_view_b: ViewGeometry) -> F
         off = np.subtract(initial_view_b.principal_offset_px, base.principal_offset_px)
         z[j + 1 : j + 3] = off / model.sigma_pp_px
     return z
+
+
+# The corrections the decision compares: which of the six rig parameters (rotation
+# vector 0-2, translation along B's u, v, d 3-5) move from the header.
+CORRECTIONS: dict[str, tuple[int, ...]] = {
+    "header": (),
+    "translation": (3, 4, 5),
+    "full": (0, 1, 2, 3, 4, 5),
+}
+
+
+def _fit_subset(model: ResidualModel, free: NDArray[np.bool_], z0: FloatArray) -> FloatArray:
+    """The minimum z (n,) of eq. (5) plus priors with only the ``free`` parameters moving
+    (MINPACK LM through scipy; the Jacobian exact by complex step)."""
+    from scipy.optimize import least_squares
+
+    def full(x: FloatArray) -> FloatArray:
+        z = np.zeros(model.n_params)
+        z[free] = x
+        return z
+
+    fit = least_squares(
+        lambda x: model.residuals(full(x)[None])[0],
+        z0[free],
+        jac=lambda x: model.residuals_and_jacobian(full(x))[1][:, free],
+        method="lm",
+        xtol=1e-10,
+        ftol=1e-12,
+    )
+    return full(fit.x)
+
+
+def calibrate_supported(
+    view_a: ViewGeometry,
+    view_b: ViewGeometry,
+    points_a_px: ArrayLike,
+    points_b_px: ArrayLike,
+    *,
+    method: str = "palm",
+    priors: CalibrationPriors = CalibrationPriors(),  # noqa: B008 (frozen)
+    names: Sequence[str] | None = None,
+    candidates: Sequence[str] = tuple(CORRECTIONS),
+) -> CalibrationResult:
+    """Move view B from its header only as far as the clicks support.
+
+    1. :func:`calibrate` (all six rig parameters, unit click noise), then the click
+       noise sigma is estimated from its residuals (:func:`recon.uncertainty.click_sigma_px`)
+       and the full correction is fitted again with the features weighted 1 / sigma^2
+       (so the priors weigh against clicks of the measured noise, not of 1 px).
+    2. Each candidate correction of :data:`CORRECTIONS` (the header itself, a
+       translation of B's rig only, the full rigid correction) is fitted with the same
+       noise and priors and scored by its Laplace evidence
+       (:func:`recon.uncertainty.log_evidence`): fit minus an Occam term for every
+       direction the data must fix. The best-scoring one is returned.
+
+    The result carries ``correction`` (the choice), ``decision`` (each candidate's log
+    evidence, residual and pose) and ``posterior``: the full correction's Laplace
+    covariance centred on the chosen pose (the uncertainty of the pose does not shrink
+    because a simpler correction was chosen).
+
+    Raises :class:`CalibrationError` as :func:`calibrate` does, or for an unknown
+    candidate name.
+    """
+    unknown = [c for c in candidates if c not in CORRECTIONS]
+    if unknown or not candidates:
+        raise CalibrationError(
+            f"unknown correction {unknown or candidates!r} (use some of {tuple(CORRECTIONS)})"
+        )
+    start = time.perf_counter()
+    first = calibrate(view_a, view_b, points_a_px, points_b_px, method=method, priors=priors,
+                      names=names)
+    pa = _checked_points(points_a_px, "points_a_px")
+    pb = _checked_points(points_b_px, "points_b_px")
+    unit = ResidualModel(view_a, view_b, pa, pb, np.ones(len(pa)), priors, False)
+    sigma = pose_posterior(unit, _initial_parameters(unit, first.view_b)).click_sigma_px
+    w = np.full(len(pa), 1.0 / sigma**2)
+    full = calibrate(view_a, view_b, pa, pb, method=method, priors=priors, names=names,
+                     weights=w, initial_view_b=first.view_b)
+    weighted = ResidualModel(view_a, view_b, pa, pb, w, priors, False)
+    z_full = _initial_parameters(weighted, full.view_b)
+    posterior = pose_posterior(unit, z_full)
+    sigma = posterior.click_sigma_px
+    w = np.full(len(pa), 1.0 / sigma**2)
+    weighted = ResidualModel(view_a, view_b, pa, pb, w, priors, False)
+    rows: dict[str, dict] = {}
+    fits: dict[str, FloatArray] = {}
+    for name in candidates:
+        free = np.zeros(unit.n_params, dtype=bool)
+        free[list(CORRECTIONS[name])] = True
+        if name == "full":
+            z = z_full
+        elif not free.any():
+            z = np.zeros(unit.n_params)
+        else:
+            z = _fit_subset(weighted, free, z_full * free)
+        fits[name] = z
+        rotvec, t_mm = unit.pose(z)
+        dist = unit.distances(z)[0]
+        rows[name] = {
+            "log_evidence": log_evidence(unit, z, free, sigma),
+            "error_px": float(np.mean(dist)),
+            "rotation_deg": float(np.rad2deg(np.linalg.norm(rotvec))),
+            "translation_mm": float(np.linalg.norm(t_mm)),
+        }
+    chosen = max(rows, key=lambda k: rows[k]["log_evidence"])
+    z = fits[chosen]
+    messages = [m for m in full.warnings if "still" not in m and "implausible" not in m]
+    result = _result(unit, z, method, first.iterations + full.iterations, full.converged,
+                     np.ones(len(pa)), _labels(names, len(pa)), messages, start)
+    centred = PosePosterior(**{**posterior.__dict__, "z_hat": z})
+    decision = {
+        "rule": "largest Laplace evidence (fit to the clicks minus an Occam term per "
+        "direction the clicks must fix), click noise estimated from the residuals",
+        "chosen": chosen,
+        "click_sigma_px": sigma,
+        "candidates": rows,
+    }
+    return _replace_result(result, correction=chosen, posterior=centred, decision=decision)
+
+
+def _labels(names: Sequence[str] | None, k: int) -> list[str]:
+    return [f"feature {i + 1}" for i in range(k)] if names is None else [str(x) for x in names]
+
+
+def _replace_result(result: CalibrationResult, **changes: object) -> CalibrationResult:
+    from dataclasses import replace
+
+    return replace(result, **changes)
 
 
 def refine_with_matches(

@@ -20,7 +20,8 @@ from recon.errors import CoronaryError
 
 EXIT_USER_ERROR = 2
 
-BENCHES = ("centerline", "calibration", "matching", "reconstruct", "speed")
+BENCHES = ("centerline", "calibration", "matching", "reconstruct", "speed", "intervals",
+           "sections")
 
 
 class _Parser(argparse.ArgumentParser):
@@ -218,6 +219,14 @@ def build_parser() -> argparse.ArgumentParser:
             "X-ray intensity), log (linear in attenuation) or auto (its "
             "PixelIntensityRelationship tag when LIN/LOG, else estimated); default auto",
         )
+    p.add_argument(
+        "--calibration",
+        choices=("full", "supported", "header"),
+        default="full",
+        help="how far view B moves from its header: full (all six rig parameters; default), "
+        "supported (only as far as the clicks support: header, rig translation or full) "
+        "or header (no correction)",
+    )
     p.add_argument(
         "--allow-close-views",
         action="store_true",
@@ -418,6 +427,7 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
         intensity_a=args.intensity_a,
         intensity_b=args.intensity_b,
         allow_close_views=args.allow_close_views,
+        calibration=args.calibration,
     )
     if segment is None:
         rec = reconstruct_tree(angio_a, angio_b, seeds, options, progress=progress)
@@ -586,9 +596,10 @@ def cmd_bench(args: argparse.Namespace) -> int:
             return EXIT_USER_ERROR
         extra["jitter"] = args.jitter
     if args.workers is not None:
-        if args.name != "reconstruct" or args.suite != "regular" or args.workers < 1:
+        if (args.name not in ("reconstruct", "intervals") or args.suite != "regular"
+                or args.workers < 1):
             print("coronary3d: error: --workers N (N >= 1) is for bench reconstruct "
-                  "(regular suite)", file=sys.stderr)
+                  "(regular suite) and bench intervals", file=sys.stderr)
             return EXIT_USER_ERROR
         extra["workers"] = args.workers
     result = module.run(cases=args.cases, seed=args.seed, **extra)

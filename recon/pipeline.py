@@ -26,7 +26,13 @@ import numpy as np
 
 from recon import __version__
 from recon.bifurcation import Junction
-from recon.calibration import CalibrationResult, calibrate, refine_with_matches
+from recon.calibration import (
+    CORRECTIONS,
+    CalibrationResult,
+    calibrate,
+    calibrate_supported,
+    refine_with_matches,
+)
 from recon.centerline import VesselnessMap, compute_vesselness, trace_segment
 from recon.consistency import ConsistencyResult, check_consistency
 from recon.errors import CoronaryError
@@ -39,6 +45,7 @@ from recon.seeds import Seeds
 from recon.surface import SurfaceResult, build_surface
 from recon.triangulation import build_centerline_3d, table3_metrics
 from recon.types import Angiogram, Centerline2D, Centerline3D, Matching
+from recon.uncertainty import MeasurementIntervals, measurement_intervals, observability
 
 __all__ = [
     "PipelineError",
@@ -50,6 +57,14 @@ __all__ = [
 ]
 
 Progress = Callable[[str, float], None]
+
+# ReconstructionOptions.calibration -> the corrections calibrate_supported may choose from
+CALIBRATION_CHOICES: dict[str, tuple[str, ...]] = {
+    "supported": tuple(CORRECTIONS),
+    "full": ("full",),
+    "header": ("header",),
+}
+
 
 class PipelineError(CoronaryError):
     """The inputs cannot be reconstructed (one line: what and why)."""
@@ -74,6 +89,13 @@ class ReconstructionOptions:
     voxel_mm : surface grid size (None: chosen from the vessel radius).
     allow_close_views : go on (with a warning) when the views' central rays are less
         than :data:`MIN_VIEW_SEPARATION_DEG` apart; refused otherwise.
+    calibration : how far view B moves from its header: "full" (all six rig
+        parameters, the default), "supported" (the correction the clicks support,
+        :func:`recon.calibration.calibrate_supported`: the header, a translation of
+        B's rig, or the full correction) or "header" (B stays at its header pose).
+        "supported" keeps good real headers (tests/recon/test_real_views.py) but its
+        translation-only choice costs accuracy where the header is off in rotation
+        too, as on the phantoms (docs/benchmarks.md); so it is not the default yet.
     """
 
     matcher: str = "match3"
@@ -85,6 +107,7 @@ class ReconstructionOptions:
     intensity_a: str = "auto"
     intensity_b: str = "auto"
     allow_close_views: bool = False
+    calibration: str = "full"
 
 
 @dataclass(frozen=True, eq=False)
@@ -114,6 +137,9 @@ class Reconstruction:
     consistency: ConsistencyResult | None = None
     warnings: tuple[str, ...] = ()
     optimal_view: OptimalView | None = None  # foreshortening map and the best next view
+    # 95 % intervals of the measurements and the radius (recon.uncertainty); None when
+    # the calibration carries no posterior (self-calibration)
+    intervals: MeasurementIntervals | None = None
 
     def report(self) -> dict:
         """JSON-ready report: inputs, geometry, calibration, matching, measurements, timings."""
@@ -145,6 +171,11 @@ class Reconstruction:
                 "translation_mm": list(self.view_b.t_corr_mm),
                 "warnings": list(cal.warnings),
                 "steps": list(self.calibration_steps),
+                "correction": cal.correction,
+                "decision": cal.decision,
+                "observability": (
+                    observability(cal.posterior) if cal.posterior is not None else None
+                ),
             },
             "matching": {
                 "method": self.matching.method,
@@ -171,6 +202,11 @@ class Reconstruction:
                 "volume_mm3": float(self.surface.mesh.volume),
             },
             "measurements": self.measurements.to_dict(),
+            "measurements_ci95": (
+                {k: list(v) for k, v in self.intervals.ci95.items()}
+                if self.intervals is not None else None
+            ),
+            "uncertainty": _uncertainty_report(self.intervals),
             # how each view's stored values were taken to relate to attenuation, and why
             "intensity": {
                 "a": _intensity_report(self.centerline_a),
@@ -262,6 +298,9 @@ def reconstruct_pair(
     """
     options = options or ReconstructionOptions()
     seg = _segment(seeds, options.segment)
+    if options.calibration not in CALIBRATION_CHOICES:
+        raise PipelineError(f"unknown calibration {options.calibration!r} (use one of "
+                            f"{', '.join(CALIBRATION_CHOICES)})")
     view_a, view_b_header = angio_a.geometry, angio_b.geometry
     close_views = _check_separation(view_a, view_b_header, options.allow_close_views)
     timings: dict[str, float] = {}
@@ -290,8 +329,9 @@ def reconstruct_pair(
     # 2. Calibrate view B on the corresponding features (eq. 5, PALM).
     _notify(progress, "calibrating the geometry", 0.35)
     feat_a, feat_b = _features(seeds, options.segment, cl_a, cl_b)
-    cal = calibration or calibrate(view_a, view_b_header, feat_a, feat_b,
-                                   method=options.optimizer)
+    cal = calibration or calibrate_supported(
+        view_a, view_b_header, feat_a, feat_b, method=options.optimizer,
+        candidates=CALIBRATION_CHOICES[options.calibration])
     steps = [_step("features" if calibration is None else "tree", cal)]
     lap("calibrate")
 
@@ -341,6 +381,14 @@ def reconstruct_pair(
     radius_mm = np.interp(cl3d.s_mm, profile.s_mm, profile.diameter_smooth_mm) / 2.0
     best_view = optimal_view(cl3d.X_world, radius_mm, view_a, {"a": view_a, "b": cal.view_b})
     lap("optimal_view")
+
+    # 9. 95 % intervals: the pose posterior and the 2D radius error, sampled.
+    intervals = None
+    if cal.posterior is not None:
+        _notify(progress, "estimating the intervals", 0.97)
+        intervals = measurement_intervals(view_a, view_b_header, cal.posterior, cl3d,
+                                          measurements)
+        lap("intervals")
     timings["total"] = round(sum(timings.values()), 2)
     _notify(progress, "done", 1.0)
 
@@ -366,6 +414,7 @@ def reconstruct_pair(
         consistency=consistency,
         warnings=tuple(warnings),
         optimal_view=best_view,
+        intervals=intervals,
     )
 
 
@@ -432,6 +481,20 @@ def input_warnings(info: dict, view: str) -> list[str]:
         return []
     more = f" ({'; '.join(details)})" if details else ""
     return [f"view {view}: {', '.join(words)} image{more}; its radii are less certain"]
+
+
+def _uncertainty_report(intervals: MeasurementIntervals | None) -> dict | None:
+    """How the 95 % intervals were made (None without them)."""
+    if intervals is None:
+        return None
+    return {
+        "method": "sampled: view B's pose from the calibration's Laplace posterior and each "
+        "view's 2D radius error (from the two views' disagreement), re-triangulated and "
+        "re-measured per draw; interval = value +- 1.96 sd",
+        "samples": intervals.n_samples,
+        "lesion_found_fraction": intervals.lesion_found_fraction,
+        "radius_error": intervals.radius_error,
+    }
 
 
 def _intensity_report(cl: Centerline2D) -> dict:

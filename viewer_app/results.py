@@ -125,7 +125,9 @@ def calibration_markdown(res: CalibrationResult) -> str:
 def results_markdown(rec: Reconstruction) -> str:
     """3D measurements, the Table-3 metrics (per-view sub-tables side by side) and timings."""
     rows = ["| measurement | value |", "| --- | --- |"]
-    rows += [f"| {k} | {fmt(v)} |" for k, v in rec.measurements.to_dict().items()]
+    ci = rec.intervals.ci95 if getattr(rec, "intervals", None) is not None else {}
+    rows += [f"| {k} | {fmt(v)}" + (f" ({fmt(ci[k][0])}-{fmt(ci[k][1])})" if k in ci else "")
+             + " |" for k, v in rec.measurements.to_dict().items()]
     for view, other in (("a", "B"), ("b", "A")):
         stretches = rec.centerline_3d.overlap_stretches_mm(view)
         if stretches:

@@ -46,6 +46,8 @@ CENTERLINE_COLUMNS = (
     "area_mm2",
     "radius_a_mm",
     "radius_b_mm",
+    "radius_lo95_mm",
+    "radius_hi95_mm",
     "branch",
 )
 
@@ -88,16 +90,26 @@ def _mesh(rec: Reconstruction | TreeReconstruction) -> trimesh.Trimesh:
 def centerline_csv(rec: Reconstruction | TreeReconstruction) -> bytes:
     """centerline.csv: header line then one row per point, each segment proximal to
     distal, segments in the seeds' order; ``branch`` is the segment's 0-based index
-    in seeds.json."""
+    in seeds.json.
+
+    radius_lo95_mm / radius_hi95_mm: the 95 % interval of radius_mm
+    (:mod:`recon.uncertainty`); nan when the reconstruction has no intervals.
+    diameter_mm: the measured lumen profile, nan before a branch's carina (its
+    measurements start there)."""
     buf = io.StringIO()
     buf.write(",".join(CENTERLINE_COLUMNS) + "\n")
     for branch_id, seg in _segments(rec):
         cl = seg.centerline_3d
         area = seg.surface.sections.area_mm2
+        iv = getattr(seg, "intervals", None)
+        nan = np.full(len(cl.s_mm), np.nan)
+        lo, hi = (nan, nan) if iv is None else (iv.radius_lo_mm, iv.radius_hi_mm)
         table = np.column_stack([cl.s_mm, cl.X_world, np.sqrt(area / np.pi),
-                                 2.0 * np.sqrt(area / np.pi), area, cl.radius_a_mm,
-                                 cl.radius_b_mm, np.full(len(cl.s_mm), branch_id)])
-        np.savetxt(buf, table, delimiter=",", fmt=["%.4f"] * 9 + ["%d"])
+                                 np.interp(cl.s_mm, seg.profile.s_mm, seg.profile.diameter_mm,
+                                           left=np.nan, right=np.nan),
+                                 area, cl.radius_a_mm,
+                                 cl.radius_b_mm, lo, hi, np.full(len(cl.s_mm), branch_id)])
+        np.savetxt(buf, table, delimiter=",", fmt=["%.4f"] * 11 + ["%d"])
     return buf.getvalue().encode()
 
 

@@ -158,3 +158,15 @@ def test_diameter_colour_scale() -> None:
     assert rgb.dtype == np.uint8 and rgb.shape == (4, 3)
     assert tuple(rgb[0]) == (220, 30, 30)  # half the reference or less: red
     assert tuple(rgb[2]) == tuple(rgb[3]) == (40, 180, 70)  # at the reference: green
+
+
+def test_results_show_the_95_pct_interval_beside_the_value() -> None:
+    rec = SimpleNamespace(
+        measurements=SimpleNamespace(to_dict=lambda: {"mld_mm": 1.48, "has_lesion": True}),
+        centerline_3d=SimpleNamespace(overlap_stretches_mm=lambda view: []),
+        metrics={}, timings_ms={},
+        intervals=SimpleNamespace(ci95={"mld_mm": (1.39, 1.57)}),
+    )
+    lines = results_markdown(rec).splitlines()
+    assert "| mld_mm | 1.48 (1.39-1.57) |" in lines
+    assert "| has_lesion | True |" in lines

@@ -11,13 +11,15 @@ import pytest
 from recon.bench.common import pose_error
 from recon.synth import make_phantom
 
-BENCHES = ("centerline", "calibration", "matching", "reconstruct", "speed")
+BENCHES = ("centerline", "calibration", "matching", "reconstruct", "speed", "intervals",
+           "sections")
 
 
 #: Parameters after (cases, seed): the suite for the benches that take --suite varied,
 #: and the click jitter and the Dask workers of bench reconstruct.
 EXTRA = {"centerline": {"suite": "regular"},
-         "reconstruct": {"suite": "regular", "jitter": 0, "workers": None}}
+         "reconstruct": {"suite": "regular", "jitter": 0, "workers": None},
+         "intervals": {"workers": None, "checkpoint": None}}
 
 
 @pytest.mark.parametrize("name", BENCHES)

@@ -107,3 +107,24 @@ def test_a_file_that_cannot_be_written_leaves_no_part_behind(demo_rec, tmp_path)
     assert (tmp_path / "mesh.stl").is_dir() and not list((tmp_path / "mesh.stl").iterdir())
     assert not (tmp_path / "report.json").exists()
     assert not list(tmp_path.glob(".*tmp"))
+
+
+def test_the_report_and_the_table_carry_the_95_pct_intervals(demo_rec):
+    files = outputs_as_bytes(demo_rec, ("stl",))
+    report = json.loads(files["report.json"])
+    numbers = {k for k, v in report["measurements"].items() if not isinstance(v, bool)}
+    assert set(report["measurements_ci95"]) == numbers
+    for key, (lo, hi) in report["measurements_ci95"].items():
+        assert lo <= report["measurements"][key] <= hi, key
+    assert report["uncertainty"]["samples"] >= 16
+    obs = report["calibration"]["observability"]
+    assert obs["summary"] and set(obs["directions"]) >= {"translation_baseline",
+                                                         "rotation_normal"}
+    assert report["calibration"]["correction"] in ("header", "translation", "full")
+    lines = files["centerline.csv"].decode().splitlines()
+    table = np.loadtxt(lines[1:], delimiter=",")
+    col = {name: i for i, name in enumerate(CENTERLINE_COLUMNS)}
+    radius = table[:, col["radius_mm"]]
+    lo, hi = table[:, col["radius_lo95_mm"]], table[:, col["radius_hi95_mm"]]
+    assert np.all(np.isfinite(lo)) and np.all(lo <= radius + 1e-4) and np.all(radius <= hi + 1e-4)
+    assert np.median(hi - lo) > 0

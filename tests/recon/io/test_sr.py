@@ -60,8 +60,10 @@ def test_the_sr_holds_the_reports_measurements_with_their_codes(demo_sr):
         assert (m.derivation.value if m.derivation else None) == derivation, key
         assert (m.method.value if m.method else None) == method, key
         assert m.value == pytest.approx(report["measurements"][key], rel=1e-9), key
-    # no intervals in this report, so none in the SR
-    assert not _uncertainties(pydicom.dcmread(demo_sr / SR_FILE_NAME))
+    # the report's 95 % intervals reach the SR as measurement uncertainties
+    assert report["measurements_ci95"]
+    found = _uncertainties(pydicom.dcmread(demo_sr / SR_FILE_NAME))
+    assert sorted(found) == [LOWER_UNCERTAINTY, UPPER_UNCERTAINTY]
 
 
 def test_the_sr_references_both_views_and_copies_their_patient_and_study(demo_sr):

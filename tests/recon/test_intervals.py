@@ -1,0 +1,117 @@
+"""The 95 % intervals of the measurements (recon.uncertainty.measurement_intervals)."""
+
+import numpy as np
+import pytest
+from scipy.ndimage import gaussian_filter1d
+from test_calibration import VIEW_A, VIEW_B
+from test_uncertainty import clicks, prior_pose
+
+from recon.calibration import calibrate_supported
+from recon.measure import lumen_profile, measure_lumen
+from recon.surface import elliptic_cross_sections
+from recon.triangulation import radius_mm_eq11
+from recon.types import Centerline3D, arclength
+from recon.uncertainty import measurement_intervals, radius_error_model
+
+SPACING_MM = 0.25
+
+
+def tube(length_mm: float = 60.0) -> tuple[np.ndarray, np.ndarray]:
+    """A gently curved centerline (M, 3) through the isocenter and its true radius (M,):
+    1.5 mm with a 50 % stenosis (cosine, 10 mm long) in the middle."""
+    t = np.linspace(-0.5, 0.5, 4000)
+    X = np.column_stack([length_mm * t, 8.0 * np.sin(3.0 * t), 20.0 * t**2])
+    s = arclength(X)
+    keep = np.searchsorted(s, np.arange(0.0, s[-1], SPACING_MM))
+    X, s = X[keep], s[keep] - s[keep][0]
+    mid = 0.5 * s[-1]
+    bump = np.where(np.abs(s - mid) < 5.0, 0.5 * (1 + np.cos(np.pi * (s - mid) / 5.0)), 0.0)
+    return X, 1.5 * (1.0 - 0.5 * bump)
+
+
+def correlated(rng: np.random.Generator, m: int, sd: float, corr_mm: float) -> np.ndarray:
+    f = gaussian_filter1d(rng.standard_normal(m), corr_mm / SPACING_MM / np.sqrt(2))
+    return sd * f / np.std(f)
+
+
+def centerline_of(X: np.ndarray, r_a: np.ndarray, r_b: np.ndarray) -> Centerline3D:
+    T = np.gradient(X, axis=0)
+    T /= np.linalg.norm(T, axis=1, keepdims=True)
+    return Centerline3D(X_world=X, s_mm=arclength(X), tangents=T, radius_a_mm=r_a,
+                        radius_b_mm=r_b, X_raw_world=X, points_a_px=np.zeros((len(X), 2)),
+                        points_b_px=np.zeros((len(X), 2)))
+
+
+def simulated(rng: np.random.Generator, rel_sd: float = 0.04):
+    """One reconstruction as the pipeline would make it: B's true pose drawn from the
+    prior, 6 clicks of 0.7 px noise, the supported calibration; the tube triangulated from
+    its true projections under the calibrated pose; each view's radius in px off by a
+    correlated relative error (sd ``rel_sd``, 1 mm), scaled back by eq. (11)."""
+    truth_b = VIEW_B.with_correction(*prior_pose(rng.standard_normal(6)))
+    pa, pb = clicks(truth_b, 6, 0.7, rng)
+    cal = calibrate_supported(VIEW_A, VIEW_B, pa, pb)
+    X, r = tube()
+    from recon.geometry import triangulate
+
+    ones = np.ones(len(X))
+    Xe = triangulate(VIEW_A.project(X), truth_b.project(X), VIEW_A, cal.view_b)
+    m = len(X)
+    r_a = r * radius_mm_eq11(ones, Xe, VIEW_A) / radius_mm_eq11(ones, X, VIEW_A)
+    r_b = r * radius_mm_eq11(ones, Xe, cal.view_b) / radius_mm_eq11(ones, X, truth_b)
+    r_a = r_a * np.exp(correlated(rng, m, rel_sd, 1.0))
+    r_b = r_b * np.exp(correlated(rng, m, rel_sd, 1.0))
+    cl = centerline_of(Xe, r_a, r_b)
+    area = elliptic_cross_sections(cl, VIEW_A, cal.view_b).area_mm2
+    meas = measure_lumen(lumen_profile(cl.s_mm, area))
+    true = {"mld_mm": 1.5, "segment_length_mm": float(arclength(X)[-1]),
+            "diameter_stenosis_pct": 50.0}
+    return cal, cl, meas, true
+
+
+def test_every_measurement_has_an_interval_around_it():
+    rng = np.random.default_rng(1)
+    cal, cl, meas, _ = simulated(rng)
+    iv = measurement_intervals(VIEW_A, VIEW_B, cal.posterior, cl, meas)
+    numbers = {k for k, v in meas.to_dict().items() if not isinstance(v, bool)}
+    assert set(iv.ci95) == numbers
+    for key, (lo, hi) in iv.ci95.items():
+        value = meas.to_dict()[key]
+        assert lo <= value <= hi, key
+    assert iv.ci95["mld_mm"][1] > iv.ci95["mld_mm"][0]
+    assert iv.radius_lo_mm.shape == iv.radius_hi_mm.shape == cl.s_mm.shape
+    assert np.all(iv.radius_lo_mm <= iv.radius_hi_mm)
+
+
+def test_the_intervals_cover_the_truth_of_simulated_reconstructions():
+    """Pose from the prior, clicks and 2D radius errors as the intervals model them: the
+    95 % intervals hold the truth in at least 16 of 20 cases (binomial: 95 % coverage
+    gives fewer in 1.6 % of runs) and are not uselessly wide (median error at least a
+    fifth of the interval's sd)."""
+    rng = np.random.default_rng(7)
+    hits = {"mld_mm": 0, "segment_length_mm": 0, "diameter_stenosis_pct": 0}
+    z = {k: [] for k in hits}
+    n = 20
+    for _ in range(n):
+        cal, cl, meas, true = simulated(rng)
+        iv = measurement_intervals(VIEW_A, VIEW_B, cal.posterior, cl, meas)
+        for key in hits:
+            lo, hi = iv.ci95[key]
+            hits[key] += lo <= true[key] <= hi
+            z[key].append(abs(meas.to_dict()[key] - true[key]) / ((hi - lo) / 2 / 1.96))
+    print({k: (hits[k], round(float(np.median(z[k])), 2)) for k in hits})
+    for key in hits:
+        assert hits[key] >= 0.8 * n, (key, hits[key], np.median(z[key]))
+        assert np.median(z[key]) > 0.2, (key, np.median(z[key]))
+
+
+def test_the_radius_error_model_recovers_a_known_error():
+    rng = np.random.default_rng(2)
+    X, r = tube(120.0)
+    m = len(X)
+    ea, eb = correlated(rng, m, 0.05, 1.0), correlated(rng, m, 0.05, 1.0)
+    model = radius_error_model(arclength(X), r * np.exp(ea), r * np.exp(eb))
+    assert np.median(model.local_sd) == pytest.approx(0.05, rel=0.3)
+    assert 0.4 < model.correlation_mm < 2.5
+    assert model.offset_sd < 0.02
+    same = radius_error_model(arclength(X), r, r)  # two views that agree: no 2D error
+    assert same.offset_sd == 0.0 and np.all(same.local_sd == 0.0)
