@@ -8,6 +8,7 @@ code 2. Set CORONARY3D_DEBUG=1 to see the traceback instead.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import os
@@ -61,6 +62,14 @@ def _number(kind: type, low: float | None = None, high: float | None = None,
 
     parse.__name__ = kind.__name__
     return parse
+
+
+def _folder(text: str) -> str:
+    """An argparse type for --out: a folder name (an empty one is refused)."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError("give a folder (an empty name would mean the current "
+                                         "folder)")
+    return text
 
 
 _FINITE = _number(float)
@@ -139,7 +148,7 @@ def build_parser() -> argparse.ArgumentParser:
         "with the nominal geometry in the headers and a known header error on view B, "
         "plus seeds.json (clicks) and truth.json (ground truth).",
     )
-    p.add_argument("--out", required=True, metavar="DIR", help="output folder")
+    p.add_argument("--out", required=True, type=_folder, metavar="DIR", help="output folder")
     p.add_argument(
         "--preset",
         default="static",
@@ -165,7 +174,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("file_a", nargs="?", metavar="A", help="reference view (DICOM or PNG/TIFF)")
     p.add_argument("file_b", nargs="?", metavar="B", help="second view")
     p.add_argument("--seeds", metavar="FILE", help="clicks file (seeds.json)")
-    p.add_argument("--out", required=True, metavar="DIR", help="output folder")
+    p.add_argument("--out", required=True, type=_folder, metavar="DIR", help="output folder")
     p.add_argument("--demo", action="store_true", help="use the bundled demo case")
     p.add_argument("--matcher", default="match3", choices=["match1", "match2", "match3", "match4"])
     p.add_argument("--optimizer", default="palm", choices=["palm", "lm", "anneal"])
@@ -216,7 +225,7 @@ def build_parser() -> argparse.ArgumentParser:
         "DIR/results.csv (and results.parquet with the [batch] extra) has one row per case.",
     )
     p.add_argument("manifest", metavar="MANIFEST.csv")
-    p.add_argument("--out", required=True, metavar="DIR", help="output folder")
+    p.add_argument("--out", required=True, type=_folder, metavar="DIR", help="output folder")
     p.add_argument("--workers", type=_COUNT, default=1, metavar="N",
                    help="local worker processes (default 1; ignored with --scheduler)")
     p.add_argument("--scheduler", metavar="ADDRESS",
@@ -331,7 +340,7 @@ def cmd_phantom(args: argparse.Namespace) -> int:
 def cmd_reconstruct(args: argparse.Namespace) -> int:
     from recon.io.angiogram import load_angiogram
     from recon.io.demo import demo_paths
-    from recon.io.outputs import write_outputs
+    from recon.io.outputs import check_output_dir, write_outputs
     from recon.io.seeds_file import load_seeds
     from recon.pipeline import ReconstructionOptions, reconstruct_pair
 
@@ -357,6 +366,8 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
         if not args.quiet:
             print(f"[{fraction * 100:5.1f}%] {stage}", file=sys.stderr, flush=True)
 
+    inputs = _input_files(file_a, file_b, seeds_path, getattr(args, "geometry_json", None))
+    check_output_dir(Path(args.out), formats, args.sr, inputs)  # before any work
     overrides = _overrides(args)
     t0 = time.perf_counter()
     angio_a = load_angiogram(file_a, frame=args.frame_a, overrides=overrides)
@@ -378,7 +389,8 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
         allow_close_views=args.allow_close_views,
     )
     rec = reconstruct_pair(angio_a, angio_b, seeds, options, progress=progress)
-    written = write_outputs(rec, Path(args.out), formats=formats, sr_sources=sr_sources)
+    written = write_outputs(rec, Path(args.out), formats=formats, sr_sources=sr_sources,
+                            inputs=inputs)
     for line in rec.warnings:  # shown even with --quiet: they qualify the numbers
         print(f"coronary3d: warning: {line}", file=sys.stderr)
     if not args.quiet:
@@ -392,6 +404,19 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
     for path in written:
         print(path)
     return 0
+
+
+def _input_files(file_a: str, file_b: str, seeds: str,
+                 geometry_json: str | None) -> list[tuple[str, str]]:
+    """(role, path) of every file a reconstruction reads, which no output may replace."""
+    found = [("file A", file_a), ("file B", file_b), ("seeds file", seeds)]
+    if geometry_json:
+        found.append(("geometry JSON", geometry_json))
+    for role, path in (("A", file_a), ("B", file_b)):
+        sidecar = Path(path).with_suffix(".json")
+        if sidecar != Path(path):
+            found.append((f"geometry JSON of file {role}", str(sidecar)))
+    return found
 
 
 def _mesh_formats(text: str) -> tuple[str, ...] | None:
@@ -533,9 +558,17 @@ COMMANDS = {
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run one command; returns the exit code (argparse's own errors exit 2 through SystemExit)."""
+    import signal
+
+    from recon.io.output_set import Terminated, raise_on_termination
+
     args = build_parser().parse_args(argv)
+    handlers = {sig: signal.getsignal(sig) for sig in (signal.SIGTERM, signal.SIGINT)}
+    raise_on_termination()  # SIGTERM / SIGINT clean up temporary files on their way out
     try:
         return COMMANDS[args.command](args)
+    except Terminated as exc:
+        return 128 + exc.signum
     except KeyboardInterrupt:
         return 130
     except BrokenPipeError:  # stdout closed early (`coronary3d info --json | head`)
@@ -546,6 +579,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             raise
         print(f"coronary3d: error: {_one_line(exc)}", file=sys.stderr)
         return EXIT_USER_ERROR
+    finally:
+        for sig, handler in handlers.items():
+            with contextlib.suppress(ValueError, TypeError):  # not the main thread
+                signal.signal(sig, handler)
 
 
 def _one_line(exc: BaseException) -> str:
