@@ -246,6 +246,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("file_b", nargs="?", metavar="B")
     p.add_argument("--seeds", metavar="FILE")
     p.add_argument("--host", default="127.0.0.1")
+    p.add_argument("--out", type=_folder, metavar="DIR",
+                   help="the folder 'Save seeds to path' writes into (default: the current one)")
     p.add_argument("--port", type=_number(int, 0, 65535), default=8080,
                    help="port to serve on (0: any free port)")
 
@@ -500,6 +502,9 @@ def cmd_view(args: argparse.Namespace) -> int:
     file_a = args.file_a or str(demo["a"])
     file_b = args.file_b or str(demo["b"])
     seeds = args.seeds or (str(demo["seeds"]) if demo else None)
+    if args.host not in ("127.0.0.1", "localhost", "::1"):
+        print(f"coronary3d: warning: --host {args.host}: the viewer (and both angiograms) can be "
+              "reached from other machines by anyone given its address", file=sys.stderr)
     run_viewer(
         file_a,
         file_b,
@@ -507,6 +512,7 @@ def cmd_view(args: argparse.Namespace) -> int:
         host=args.host,
         port=args.port,
         on_ready=lambda url: print(f"coronary3d viewer: {url}", flush=True),
+        out_dir=args.out,
     )
     return 0
 

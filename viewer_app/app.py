@@ -10,6 +10,8 @@ goes through ``recon`` (the same code as ``coronary3d reconstruct``).
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
 import logging
 import tempfile
@@ -36,6 +38,7 @@ from recon.io import (
 from recon.seeds import Seeds
 from recon.types import Angiogram
 from viewer_app import scene
+from viewer_app.access import PATCHED_VISER_VERSION, FileAccess, ServerGuard, guarded_serve
 from viewer_app.panels import Panels, build_panels
 from viewer_app.scene import PANEL_SHIFT, View
 from viewer_app.state import (
@@ -72,6 +75,9 @@ class ViewerApp:
     frame_a, frame_b : 0-based frames of cine runs (None: the loader's choice).
     autosave_path : where marks are autosaved; None:
         ``~/.cache/coronary3d/autosave/<pair>.json``.
+    out_dir : the only folder "Save seeds to path" writes into (None: the
+        current folder). Paths typed in the page are confined to it and to the
+        folders of A, B and the seeds file (:mod:`viewer_app.access`).
 
     Raises
     ------
@@ -89,6 +95,7 @@ class ViewerApp:
         frame_a: int | None = None,
         frame_b: int | None = None,
         autosave_path: str | Path | None = None,
+        out_dir: str | Path | None = None,
     ) -> None:
         if (path_a is None) != (path_b is None):
             raise ValueError("give both angiograms (A and B) or none for the demo case")
@@ -112,7 +119,22 @@ class ViewerApp:
         angio_b = load_angiogram(path_b, frame=frame_b)
         seeds = load_seeds(seeds_path) if seeds_path is not None else None
 
-        self.server = viser.ViserServer(host=host, port=port, verbose=False)
+        self.access = FileAccess(
+            [Path(p).parent for p in (path_a, path_b, seeds_path) if p is not None]
+            + [Path(self._tmpdir.name)],
+            out_dir if out_dir is not None else Path.cwd(),
+        )
+        self.server_guard = ServerGuard(host)
+        # viser's start-up banner gives the address without the token: not printed
+        with guarded_serve(self.server_guard), contextlib.redirect_stdout(io.StringIO()):
+            self.server = viser.ViserServer(host=host, port=port, verbose=False)
+        if not self.server_guard.installed:  # a viser that no longer starts servers this way
+            self.server.stop()
+            raise RuntimeError(f"viser {viser.__version__}: the viewer's access check could not "
+                               f"be installed (written for {PATCHED_VISER_VERSION})")
+        self.server_guard.port = self.server.get_port()
+        self.autosave_notices: list[str] = []
+        self.server.on_client_connect(self._greet)
         self.server.scene.set_up_direction("-y")
         self.server.initial_camera.position = (PANEL_SHIFT, -0.05, -1.5)
         self.server.initial_camera.look_at = (PANEL_SHIFT, -0.05, 0.0)
@@ -129,8 +151,9 @@ class ViewerApp:
     @property
     def url(self) -> str:
         host = self.server.get_host()
-        shown = "127.0.0.1" if host in ("0.0.0.0", "") else host
-        return f"http://{shown}:{self.port}/"
+        shown = "127.0.0.1" if host in ("0.0.0.0", "", "::") else host
+        shown = f"[{shown}]" if ":" in shown else shown
+        return self.server_guard.url(shown)
 
     def stop(self) -> None:
         """Autosave and stop the server."""
@@ -138,6 +161,11 @@ class ViewerApp:
             self._autosave()
         self.server.stop()
         self._tmpdir.cleanup()
+
+    def _greet(self, client: viser.ClientHandle) -> None:
+        """A page that connects learns what happened to the autosave at start."""
+        for notice in self.autosave_notices:
+            self.notify("Autosave kept aside", notice, "warning", client)
 
     def notify(
         self, title: str, body: str, level: str = "info", client: object | None = None
@@ -188,6 +216,10 @@ class ViewerApp:
             path = self._autosave_arg or default_autosave_path(angio_a.path, angio_b.path)
             self.autosave = Autosave(path, angio_a.path, angio_b.path)
             self.restored_autosave = self.autosave.load_into(self.state, seeds_path)
+            if self.autosave.notice:  # kept aside: say so now and to every page that connects
+                self.autosave_notices.append(self.autosave.notice)
+                log.warning("autosave: %s", self.autosave.notice)
+                self.notify("Autosave kept aside", self.autosave.notice, "warning")
             self.state._history.clear()
             for v in self.views.values():
                 scene.add_view_nodes(self.server.scene, v, self._make_click_callback(v.key))
@@ -215,8 +247,8 @@ class ViewerApp:
         """Open two other files; a bad file gives an error notification and returns False."""
 
         def run() -> bool:
-            angio_a = load_angiogram(path_a, frame=frame_a)
-            angio_b = load_angiogram(path_b, frame=frame_b)
+            angio_a = load_angiogram(self.access.readable(path_a, "file A"), frame=frame_a)
+            angio_b = load_angiogram(self.access.readable(path_b, "file B"), frame=frame_b)
             with self._lock:
                 self._autosave()
             self._set_pair(angio_a, angio_b, Path(path_a).name, Path(path_b).name, None, None)
@@ -373,14 +405,19 @@ class ViewerApp:
         with self._lock:
             return self.state.to_seeds()
 
-    def save_seeds(self, path: str | Path) -> None:
-        save_seeds(self.seeds(), path)
+    def save_seeds(self, path: str | Path) -> Path:
+        """Write the marks as seeds.json inside the output folder; returns the path written.
+
+        Raises ValueError for a path outside the output folder."""
+        target = self.access.writable(path, "seeds file")
+        save_seeds(self.seeds(), target)
+        return target
 
     def load_seeds(self, path: str | Path, client: object | None = None) -> bool:
         """Replace the marks by a seeds.json; errors become a notification (returns False)."""
 
         def run() -> bool:
-            seeds = load_seeds(path)
+            seeds = load_seeds(self.access.readable(path, "seeds file"))
             with self._lock:
                 self.state.load_seeds(seeds)
                 self._redraw_marks()
@@ -548,6 +585,7 @@ def run_viewer(
     on_ready: Callable[[str], None] | None = None,
     autosave_path: str | Path | None = None,
     stop_event: threading.Event | None = None,
+    out_dir: str | Path | None = None,
 ) -> None:
     """Serve the viewer until interrupted (Ctrl-C) or ``stop_event`` is set.
 
@@ -556,7 +594,7 @@ def run_viewer(
     SeedsError (one line) when the initial files cannot be used.
     """
     app = ViewerApp(path_a, path_b, seeds_path, host=host, port=port, frame_a=frame_a,
-                    frame_b=frame_b, autosave_path=autosave_path)
+                    frame_b=frame_b, autosave_path=autosave_path, out_dir=out_dir)
     if on_ready is not None:
         on_ready(app.url)
     stop = stop_event or threading.Event()

@@ -26,7 +26,8 @@ def _line_distance_px(seg: np.ndarray, point_px: np.ndarray) -> float:
 
 
 def test_server_binds_localhost_on_a_free_port(app: ViewerApp) -> None:
-    assert app.url == f"http://127.0.0.1:{app.port}/"
+    assert app.url == f"http://127.0.0.1:{app.port}/?token={app.server_guard.token}"
+    assert len(app.server_guard.token) >= 32
     assert app.port > 0
     with urllib.request.urlopen(app.url, timeout=10) as resp:
         assert resp.status == 200
@@ -155,7 +156,7 @@ def test_bad_files_become_notifications(app: ViewerApp, tmp_path: Path) -> None:
 
 def test_marks_are_autosaved_and_restored(demo_case: dict[str, Path], tmp_path: Path) -> None:
     autosave = tmp_path / "out" / "seeds.autosave.json"
-    kwargs = dict(host="127.0.0.1", port=0, autosave_path=autosave)
+    kwargs = dict(host="127.0.0.1", port=0, autosave_path=autosave, out_dir=tmp_path)
     first = ViewerApp(str(demo_case["a"]), str(demo_case["b"]), None, **kwargs)
     try:
         first.set_mode("waypoint")
