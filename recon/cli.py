@@ -20,6 +20,7 @@ from pathlib import Path
 from recon.errors import CoronaryError
 
 EXIT_USER_ERROR = 2
+_REAL_PROCESS = False  # main() runs as the process itself (not called in-process by a test)
 
 BENCHES = ("centerline", "calibration", "matching", "reconstruct")
 
@@ -212,6 +213,12 @@ def build_parser() -> argparse.ArgumentParser:
         "measurements in the inputs' patient and study (DICOM inputs only)",
     )
     p.add_argument("--quiet", action="store_true", help="no progress on stderr")
+    p.add_argument("--max-memory-gb", type=_number(float, 0.0), metavar="GB",
+                   help="memory the job may use (default 1.5 GB for 512 x 512 views, in "
+                   "proportion for larger ones; 0: no limit)")
+    p.add_argument("--max-cpu-s", type=_number(float, 0.0), metavar="S",
+                   help="CPU time the job may use (default 60 s for 512 x 512 views, in "
+                   "proportion for larger ones; 0: no limit)")
     _add_geometry_options(p)
 
     p = sub.add_parser(
@@ -342,6 +349,7 @@ def cmd_phantom(args: argparse.Namespace) -> int:
 def cmd_reconstruct(args: argparse.Namespace) -> int:
     from recon.io.angiogram import load_angiogram
     from recon.io.demo import demo_paths
+    from recon.io.limits import job_limits, limits_for
     from recon.io.outputs import check_output_dir, write_outputs
     from recon.io.seeds_file import load_seeds
     from recon.pipeline import ReconstructionOptions, reconstruct_pair
@@ -372,8 +380,12 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
     check_output_dir(Path(args.out), formats, args.sr, inputs)  # before any work
     overrides = _overrides(args)
     t0 = time.perf_counter()
-    angio_a = load_angiogram(file_a, frame=args.frame_a, overrides=overrides)
-    angio_b = load_angiogram(file_b, frame=args.frame_b, overrides=overrides)
+    # uncompressed 16-bit pixel data: about one pixel per two bytes of file
+    file_px = max(_file_bytes(file_a), _file_bytes(file_b)) // 2
+    hard = _REAL_PROCESS  # a stuck native call ends the process (no output is written yet)
+    with job_limits(limits_for(file_px, args.max_memory_gb, args.max_cpu_s), "loading", hard):
+        angio_a = load_angiogram(file_a, frame=args.frame_a, overrides=overrides)
+        angio_b = load_angiogram(file_b, frame=args.frame_b, overrides=overrides)
     sr_sources = None
     if args.sr:  # refused before the reconstruction when the inputs cannot carry an SR
         from recon.io.sr import read_sr_sources
@@ -390,7 +402,9 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
         intensity_b=args.intensity_b,
         allow_close_views=args.allow_close_views,
     )
-    rec = reconstruct_pair(angio_a, angio_b, seeds, options, progress=progress)
+    pixels = max(angio_a.image.size, angio_b.image.size)
+    with job_limits(limits_for(pixels, args.max_memory_gb, args.max_cpu_s), hard_exit=hard):
+        rec = reconstruct_pair(angio_a, angio_b, seeds, options, progress=progress)
     written = write_outputs(rec, Path(args.out), formats=formats, sr_sources=sr_sources,
                             inputs=inputs)
     for line in rec.warnings:  # shown even with --quiet: they qualify the numbers
@@ -406,6 +420,13 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
     for path in written:
         print(path)
     return 0
+
+
+def _file_bytes(path: str) -> int:
+    try:
+        return os.stat(path).st_size
+    except OSError:
+        return 0  # the loader says what is wrong with it
 
 
 def _input_files(file_a: str, file_b: str, seeds: str,
@@ -567,6 +588,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     import signal
 
     from recon.io.output_set import Terminated, raise_on_termination
+
+    global _REAL_PROCESS
+    _REAL_PROCESS = argv is None  # the console script and `python -m recon.cli`
 
     args = build_parser().parse_args(argv)
     handlers = {sig: signal.getsignal(sig) for sig in (signal.SIGTERM, signal.SIGINT)}
