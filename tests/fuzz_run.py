@@ -126,13 +126,13 @@ def main() -> int:
             if reason:
                 failures.append(f"{case.family} / {case.label}: {reason}")
         elapsed = time.perf_counter() - t0
+        print(f"{len(cases)} cases in {elapsed:.1f} s")
+        for key, count in sorted(outcomes.items()):
+            print(f"  {key}: {count}")
+        for (family, result), count in sorted(by_family.items()):
+            print(f"  {family:<16} {result}: {count}", flush=True)
         signal_counts = signal_runs(args.signals, args.seed, Path(tmp)) if args.signals \
             else Counter()
-    print(f"{len(cases)} cases in {elapsed:.1f} s")
-    for key, count in sorted(outcomes.items()):
-        print(f"  {key}: {count}")
-    for (family, result), count in sorted(by_family.items()):
-        print(f"  {family:<16} {result}: {count}")
     if signal_counts:
         print(f"{args.signals} signalled processes (+1 final run):")
         for key, count in sorted(signal_counts.items()):

@@ -70,10 +70,17 @@ def test_a_signal_while_writing_leaves_no_temporary_and_no_partial_set(
 
 def test_sigterm_during_the_computation_writes_nothing(tmp_path: Path) -> None:
     out = tmp_path / "out"
-    proc = _start(out)
-    time.sleep(3.0)  # loading or tracing, long before the outputs
+    env = {k: v for k, v in os.environ.items() if k != "CORONARY3D_DEBUG"}
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "recon.cli", "reconstruct", "--demo", "--out", str(out)],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
+    )
+    assert proc.stderr is not None
+    first = proc.stderr.readline()  # the first progress line: tracing, long before the outputs
+    assert "%]" in first, first
     proc.send_signal(signal.SIGTERM)
-    _, stderr = proc.communicate(timeout=120)
+    _, rest = proc.communicate(timeout=120)
+    stderr = first + rest
     assert proc.returncode == 128 + signal.SIGTERM, stderr
     assert "Traceback" not in stderr and not out.exists()
 
