@@ -112,7 +112,8 @@ def job_limits(limits: JobLimits, what: str = "the reconstruction",
     """
     old_data = resource.getrlimit(resource.RLIMIT_DATA)
     old_cpu = resource.getrlimit(resource.RLIMIT_CPU)
-    old_handler = None
+    old_handler: object = None
+    installed = False
     fired = False
     data_cap: int | None = None
     cpu_cap: float | None = None
@@ -135,7 +136,8 @@ def job_limits(limits: JobLimits, what: str = "the reconstruction",
     if limits.cpu_s is not None:
         with contextlib.suppress(ValueError):  # not the main thread
             old_handler = signal.signal(signal.SIGXCPU, on_xcpu)
-        if old_handler is not None:
+            installed = True
+        if installed:
             usage = resource.getrusage(resource.RUSAGE_SELF)
             spent = usage.ru_utime + usage.ru_stime
             soft_cpu = int(spent + limits.cpu_s) + 1
@@ -158,9 +160,10 @@ def job_limits(limits: JobLimits, what: str = "the reconstruction",
     finally:
         done.set()
         resource.setrlimit(resource.RLIMIT_DATA, old_data)
-        if old_handler is not None:
+        if installed:
             resource.setrlimit(resource.RLIMIT_CPU, old_cpu)
-            signal.signal(signal.SIGXCPU, old_handler)
+            signal.signal(signal.SIGXCPU, old_handler if old_handler is not None  # type: ignore
+                          else signal.SIG_DFL)
 
 
 def _warm_blas() -> None:

@@ -122,8 +122,7 @@ def test_out_must_name_a_folder(tmp_path: Path, where: str) -> None:
 def test_a_folder_in_place_of_report_json_is_refused_before_any_work(tmp_path: Path) -> None:
     out = tmp_path / "out"
     (out / "report.json").mkdir(parents=True)
-    t0 = time.monotonic()
     proc = run_cli("reconstruct", "--demo", "--out", str(out))
     assert_one_line_error(proc, str(out / "report.json"), "is a folder")
-    assert time.monotonic() - t0 < 10  # refused before the reconstruction, not after
+    assert "tracing" not in proc.stderr  # refused before the reconstruction, not after
     assert sorted(p.name for p in out.iterdir()) == ["report.json"]
