@@ -8,6 +8,7 @@ code 2. Set CORONARY3D_DEBUG=1 to see the traceback instead.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import os
@@ -19,6 +20,7 @@ from pathlib import Path
 from recon.errors import CoronaryError
 
 EXIT_USER_ERROR = 2
+_REAL_PROCESS = False  # main() runs as the process itself (not called in-process by a test)
 
 BENCHES = ("centerline", "calibration", "matching", "reconstruct", "speed", "intervals",
            "sections")
@@ -62,6 +64,14 @@ def _number(kind: type, low: float | None = None, high: float | None = None,
 
     parse.__name__ = kind.__name__
     return parse
+
+
+def _folder(text: str) -> str:
+    """An argparse type for --out: a folder name (an empty one is refused)."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError("give a folder (an empty name would mean the current "
+                                         "folder)")
+    return text
 
 
 _FINITE = _number(float)
@@ -165,7 +175,7 @@ def build_parser() -> argparse.ArgumentParser:
         "with the nominal geometry in the headers and a known header error on view B, "
         "plus seeds.json (clicks) and truth.json (ground truth).",
     )
-    p.add_argument("--out", required=True, metavar="DIR", help="output folder")
+    p.add_argument("--out", required=True, type=_folder, metavar="DIR", help="output folder")
     p.add_argument(
         "--preset",
         default="static",
@@ -193,7 +203,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("file_a", nargs="?", metavar="A", help="reference view (DICOM or PNG/TIFF)")
     p.add_argument("file_b", nargs="?", metavar="B", help="second view")
     p.add_argument("--seeds", metavar="FILE", help="clicks file (seeds.json)")
-    p.add_argument("--out", required=True, metavar="DIR", help="output folder")
+    p.add_argument("--out", required=True, type=_folder, metavar="DIR", help="output folder")
     p.add_argument("--demo", action="store_true", help="use the bundled demo case")
     p.add_argument("--matcher", default="match3", choices=["match1", "match2", "match3", "match4"])
     p.add_argument("--optimizer", default="palm", choices=["palm", "lm", "anneal"])
@@ -246,6 +256,12 @@ def build_parser() -> argparse.ArgumentParser:
                    help="put the patient name, ID and study date from the DICOM headers in "
                    "report.pdf")
     p.add_argument("--quiet", action="store_true", help="no progress on stderr")
+    p.add_argument("--max-memory-gb", type=_number(float, 0.0), metavar="GB",
+                   help="memory the job may use (default 1.5 GB for 512 x 512 views, in "
+                   "proportion for larger ones; 0: no limit)")
+    p.add_argument("--max-cpu-s", type=_number(float, 0.0), metavar="S",
+                   help="CPU time the job may use (default 60 s for 512 x 512 views, in "
+                   "proportion for larger ones; 0: no limit)")
     _add_geometry_options(p, per_file=True)
 
     p = sub.add_parser(
@@ -259,7 +275,7 @@ def build_parser() -> argparse.ArgumentParser:
         "DIR/results.csv (and results.parquet with the [batch] extra) has one row per case.",
     )
     p.add_argument("manifest", metavar="MANIFEST.csv")
-    p.add_argument("--out", required=True, metavar="DIR", help="output folder")
+    p.add_argument("--out", required=True, type=_folder, metavar="DIR", help="output folder")
     p.add_argument("--workers", type=_COUNT, default=1, metavar="N",
                    help="local worker processes (default 1; ignored with --scheduler)")
     p.add_argument("--scheduler", metavar="ADDRESS",
@@ -280,6 +296,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("file_b", nargs="?", metavar="B")
     p.add_argument("--seeds", metavar="FILE")
     p.add_argument("--host", default="127.0.0.1")
+    p.add_argument("--out", type=_folder, metavar="DIR",
+                   help="the folder 'Save seeds to path' writes into (default: the current one)")
     p.add_argument("--port", type=_number(int, 0, 65535), default=8080,
                    help="port to serve on (0: any free port)")
     _add_geometry_options(p, per_file=True)
@@ -376,7 +394,8 @@ def cmd_phantom(args: argparse.Namespace) -> int:
 def cmd_reconstruct(args: argparse.Namespace) -> int:
     from recon.io.angiogram import load_angiogram
     from recon.io.demo import demo_paths
-    from recon.io.outputs import write_outputs
+    from recon.io.limits import job_limits, limits_for
+    from recon.io.outputs import check_output_dir, write_outputs
     from recon.io.seeds_file import load_seeds
     from recon.pipeline import ReconstructionOptions, reconstruct_pair
     from recon.tree import reconstruct_tree
@@ -403,10 +422,17 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
         if not args.quiet:
             print(f"[{fraction * 100:5.1f}%] {stage}", file=sys.stderr, flush=True)
 
+    inputs = _input_files(file_a, file_b, seeds_path, getattr(args, "geometry_json", None),
+                          getattr(args, "geometry_a", None), getattr(args, "geometry_b", None))
+    check_output_dir(Path(args.out), formats, args.sr, inputs, report=args.report)
     overrides_a, overrides_b = _overrides_ab(args)
     t0 = time.perf_counter()
-    angio_a = load_angiogram(file_a, frame=args.frame_a, overrides=overrides_a)
-    angio_b = load_angiogram(file_b, frame=args.frame_b, overrides=overrides_b)
+    # uncompressed 16-bit pixel data: about one pixel per two bytes of file
+    file_px = max(_file_bytes(file_a), _file_bytes(file_b)) // 2
+    hard = _REAL_PROCESS  # a stuck native call ends the process (no output is written yet)
+    with job_limits(limits_for(file_px, args.max_memory_gb, args.max_cpu_s), "loading", hard):
+        angio_a = load_angiogram(file_a, frame=args.frame_a, overrides=overrides_a)
+        angio_b = load_angiogram(file_b, frame=args.frame_b, overrides=overrides_b)
     for angio in (angio_a, angio_b):
         _warn_replaced(angio)
     sr_sources = None
@@ -429,19 +455,23 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
         allow_close_views=args.allow_close_views,
         calibration=args.calibration,
     )
-    if segment is None:
-        rec = reconstruct_tree(angio_a, angio_b, seeds, options, progress=progress)
-        parts = [(seeds.segments[b.options.segment].name, b) for b in rec.branches]
-    else:
-        rec = reconstruct_pair(angio_a, angio_b, seeds, options, progress=progress)
-        parts = [(seeds.segments[segment].name, rec)]
-    written = write_outputs(rec, Path(args.out), formats=formats, sr_sources=sr_sources)
-    if args.report:
-        from recon.io.report_pdf import write_report_pdf
+    pixels = max(angio_a.image.size, angio_b.image.size)
+    with job_limits(limits_for(pixels, args.max_memory_gb, args.max_cpu_s), hard_exit=hard):
+        if segment is None:
+            rec = reconstruct_tree(angio_a, angio_b, seeds, options, progress=progress)
+            parts = [(seeds.segments[b.options.segment].name, b) for b in rec.branches]
+        else:
+            rec = reconstruct_pair(angio_a, angio_b, seeds, options, progress=progress)
+            parts = [(seeds.segments[segment].name, rec)]
+        extra = {}
+        if args.report:
+            from recon.io.report_pdf import report_pdf_bytes
 
-        written = [*written, write_report_pdf(Path(args.out) / "report.pdf", rec,
-                                              angio_a.image, angio_b.image,
-                                              identify=args.identify)]
+            first = parts[0][1]  # the report's page is the first segment's, as report.json
+            extra["report.pdf"] = report_pdf_bytes(first, angio_a.image, angio_b.image,
+                                                   identify=args.identify)
+    written = write_outputs(rec, Path(args.out), formats=formats, sr_sources=sr_sources,
+                            inputs=inputs, extra=extra)
     for line in rec.warnings:  # shown even with --quiet: they qualify the numbers
         print(f"coronary3d: warning: {line}", file=sys.stderr)
     if not args.quiet:
@@ -477,6 +507,29 @@ def _segment_choice(text: str | None, seeds, seeds_path: str) -> int | None | bo
     print(f"coronary3d: error: argument --segment: no segment {text!r} in {seeds_path} "
           f"(segments: {shown}; or an index from 0 to {len(names) - 1})", file=sys.stderr)
     return False
+
+
+def _file_bytes(path: str) -> int:
+    try:
+        return os.stat(path).st_size
+    except OSError:
+        return 0  # the loader says what is wrong with it
+
+
+def _input_files(file_a: str, file_b: str, seeds: str, geometry_json: str | None,
+                 geometry_a: str | None = None,
+                 geometry_b: str | None = None) -> list[tuple[str, str]]:
+    """(role, path) of every file a reconstruction reads, which no output may replace."""
+    found = [("file A", file_a), ("file B", file_b), ("seeds file", seeds)]
+    for role, path in (("geometry JSON", geometry_json), ("geometry JSON of file A", geometry_a),
+                       ("geometry JSON of file B", geometry_b)):
+        if path:
+            found.append((role, path))
+    for role, path in (("A", file_a), ("B", file_b)):
+        sidecar = Path(path).with_suffix(".json")
+        if sidecar != Path(path):
+            found.append((f"geometry JSON of file {role}", str(sidecar)))
+    return found
 
 
 def _mesh_formats(text: str) -> tuple[str, ...] | None:
@@ -560,6 +613,9 @@ def cmd_view(args: argparse.Namespace) -> int:
     file_a = args.file_a or str(demo["a"])
     file_b = args.file_b or str(demo["b"])
     seeds = args.seeds or (str(demo["seeds"]) if demo else None)
+    if args.host not in ("127.0.0.1", "localhost", "::1"):
+        print(f"coronary3d: warning: --host {args.host}: the viewer (and both angiograms) can be "
+              "reached from other machines by anyone given its address", file=sys.stderr)
     overrides_a, overrides_b = _overrides_ab(args)
     run_viewer(
         file_a,
@@ -570,6 +626,7 @@ def cmd_view(args: argparse.Namespace) -> int:
         on_ready=lambda url: print(f"coronary3d viewer: {url}", flush=True),
         overrides_a=overrides_a,
         overrides_b=overrides_b,
+        out_dir=args.out,
     )
     return 0
 
@@ -626,9 +683,20 @@ COMMANDS = {
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run one command; returns the exit code (argparse's own errors exit 2 through SystemExit)."""
+    import signal
+
+    from recon.io.output_set import Terminated, raise_on_termination
+
+    global _REAL_PROCESS
+    _REAL_PROCESS = argv is None  # the console script and `python -m recon.cli`
+
     args = build_parser().parse_args(argv)
+    handlers = {sig: signal.getsignal(sig) for sig in (signal.SIGTERM, signal.SIGINT)}
+    raise_on_termination()  # SIGTERM / SIGINT clean up temporary files on their way out
     try:
         return COMMANDS[args.command](args)
+    except Terminated as exc:
+        return 128 + exc.signum
     except KeyboardInterrupt:
         return 130
     except BrokenPipeError:  # stdout closed early (`coronary3d info --json | head`)
@@ -639,6 +707,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             raise
         print(f"coronary3d: error: {_one_line(exc)}", file=sys.stderr)
         return EXIT_USER_ERROR
+    finally:
+        for sig, handler in handlers.items():
+            with contextlib.suppress(ValueError, TypeError):  # not the main thread
+                signal.signal(sig, handler)
 
 
 def _one_line(exc: BaseException) -> str:

@@ -9,13 +9,17 @@ case needs are written under the folder given to :func:`make_cases`.
 
 Families (issue 17): DICOM header values out of range or invalid, odd DICOM
 values, corrupted bytes, broken seeds files, broken geometry / sidecar JSON,
-absurd command-line values and argparse usage errors.
+absurd command-line values, argparse usage errors, output folders that must
+be refused and left as they were (``outputs``, ``outputs-random``) and jobs
+past their memory or CPU-time limit (``limits``). Signals during a run are
+real processes: :func:`signal_run` (tests/fuzz_run.py ``--signals N``).
 """
 
 from __future__ import annotations
 
 import json
 import math
+import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -54,6 +58,8 @@ _BAD_FLAGS = {
     "--beta-deg": ["91", "-1e9", "inf", "q"],
     "--frame-a": ["-1", "x", "1.5"],
     "--segment": ["-1", "z"],
+    "--max-memory-gb": ["-1", "nan", "x"],
+    "--max-cpu-s": ["-5", "inf"],
 }
 
 
@@ -66,6 +72,7 @@ class FuzzCase:
     argv: tuple[str, ...]
     expect: str = "refused"  # or "no_traceback"
     names: str = ""  # what the error line must name (a file, a flag); "" for no check
+    keep: str = ""  # a folder whose content the case must leave as it was
 
 
 def _base_geometry() -> ViewGeometry:
@@ -278,9 +285,21 @@ def make_cases(folder: Path, n_random: int = 0, seed: int = 0) -> list[FuzzCase]
                  "match9", "--demo", "--out", str(folder / "out-u")), ()):
         cases.append(FuzzCase("usage", " ".join(argv) or "(nothing)", argv))
 
-    # 7. random draws: byte flips, random out-of-range values and broken seeds
+    # 7. output folders that must be refused, and left as they were
+    for k, builder in enumerate(_OUTPUT_TRAPS):
+        label, argv_out, names, keep, extra_args = builder(folder / f"trap-{k}")
+        cases.append(_output_case("outputs", label, argv_out, names, keep, extra_args))
+    # 8. limits reached (the pipeline runs until it hits them)
+    # (the memory limit as real processes only: at the limit OpenBLAS can loop in native code,
+    # which only the real process's watchdog ends; tests/recon/io/test_limits.py)
+    for flag, value, names in (("--max-cpu-s", "1", "--max-cpu-s"),):
+        cases.append(FuzzCase("limits", f"{flag} {value}", (
+            "reconstruct", "--demo", "--out", str(folder / f"out-{next(counter)}"), "--quiet",
+            flag, value), names=names))
+
+    # 9. random draws: byte flips, random out-of-range values, broken seeds, output traps
     for k in range(n_random):
-        family = k % 4
+        family = k % 5
         if family == 0:
             path = _flip_bytes(base, folder / f"flip{k}.dcm", rng, int(rng.integers(1, 6)))
             cases.append(FuzzCase("byte-flip", f"flips in {path.name}", ("info", str(path)),
@@ -293,11 +312,113 @@ def make_cases(folder: Path, n_random: int = 0, seed: int = 0) -> list[FuzzCase]
             flag = ("--sid-mm", "--sod-mm", "--pixel-spacing-mm", "--alpha-deg",
                     "--beta-deg")[int(rng.integers(5))]
             recon_case("flags-random", flag, str(base_a()), extra=(flag, _random_bad(flag, rng)))
-        else:
+        elif family == 3:
             label, data = _random_seeds(rng)
             path = _write(folder / f"r{k}.json", data)
             recon_case("seeds-random", label, str(base_a()), seeds=str(path))
+        else:
+            builder = _OUTPUT_TRAPS[int(rng.integers(len(_OUTPUT_TRAPS)))]
+            label, argv_out, names, keep, extra_args = builder(folder / f"rtrap-{k}", rng)
+            cases.append(_output_case("outputs-random", label, argv_out, names, keep,
+                                      extra_args))
     return cases
+
+
+# ------------------------------------------------------------------ output traps
+# Each builder makes a folder under ``root`` and returns (label, the --out value, what the
+# error must name, the folder that must stay unchanged, extra argv (e.g. --seeds));
+# the inputs are the bundled demo pair.
+def _output_case(family: str, label: str, out: str, names: str, keep: str,
+                 extra: tuple[str, ...]) -> FuzzCase:
+    seeds = ("--seeds", str(DEMO / "seeds.json")) if "--seeds" not in extra else ()
+    argv = ("reconstruct", str(DEMO / "a.dcm"), str(DEMO / "b.dcm"), *seeds, *extra,
+            "--out", out, "--quiet")
+    return FuzzCase(family, label, argv, "refused", names, keep)
+
+
+def _name(rng: np.random.Generator | None, default: str) -> str:
+    if rng is None:
+        return default
+    return str(rng.choice(["notes.txt", "a.dcm", ".DS_Store", "IM_0001", "result.csv",
+                           "report.json.bak", "sub"]))
+
+
+def _trap_empty(root: Path, rng=None) -> tuple:
+    root.mkdir(parents=True)
+    text = "" if rng is None else str(rng.choice(["", " ", "\t", "   "]))
+    return f"--out {text!r}", text, "--out", str(root), ()
+
+
+def _trap_file(root: Path, rng=None) -> tuple:
+    root.mkdir(parents=True)
+    path = root / _name(rng, "out.txt")
+    path.write_text("a file")
+    return "--out is a file", str(path), str(path), str(root), ()
+
+
+def _trap_input(root: Path, rng=None) -> tuple:
+    root.mkdir(parents=True)
+    path = root / "a.dcm"
+    path.write_bytes((DEMO / "a.dcm").read_bytes())
+    return "--out is input A", str(path), str(path), str(root), ()
+
+
+def _trap_foreign(root: Path, rng=None) -> tuple:
+    root.mkdir(parents=True)
+    name = _name(rng, "notes.txt")
+    (root / name).write_text("the user's")
+    return f"a folder holding {name}", str(root), "not a coronary3d output", str(root), ()
+
+
+def _trap_seeds_at_report(root: Path, rng=None) -> tuple:
+    root.mkdir(parents=True)
+    name = "report.json" if rng is None else str(rng.choice(
+        ["report.json", "centerline.csv", "mesh.stl", "outputs.json"]))
+    seeds = root / name
+    seeds.write_bytes((DEMO / "seeds.json").read_bytes())
+    return f"the seeds file at OUT/{name}", str(root), str(seeds), str(root), (
+        "--seeds", str(seeds))
+
+
+def _trap_dir_at_output(root: Path, rng=None) -> tuple:
+    name = "mesh.stl" if rng is None else str(rng.choice(
+        ["mesh.stl", "report.json", "centerline.csv", "centerline.vtp", "outputs.json"]))
+    (root / name).mkdir(parents=True)
+    return f"a folder at OUT/{name}", str(root), f"{name}: is a folder", str(root), ()
+
+
+def _trap_link_at_output(root: Path, rng=None) -> tuple:
+    root.mkdir(parents=True)
+    elsewhere = root.parent / f"{root.name}-target.json"
+    elsewhere.write_text("someone else's")
+    name = "report.json" if rng is None else str(rng.choice(["report.json", "mesh.stl"]))
+    (root / name).symlink_to(elsewhere)
+    return f"a link at OUT/{name}", str(root), f"{name}: is a link", str(root.parent), ()
+
+
+def _trap_hardlink_input(root: Path, rng=None) -> tuple:
+    root.mkdir(parents=True)
+    seeds = root.parent / f"{root.name}-seeds.json"
+    seeds.write_bytes((DEMO / "seeds.json").read_bytes())
+    os.link(seeds, root / "centerline.csv")
+    return "the seeds file hard-linked at OUT/centerline.csv", str(root), "seeds file", \
+        str(root.parent), ("--seeds", str(seeds))
+
+
+def _trap_not_a_folder_parent(root: Path, rng=None) -> tuple:
+    root.mkdir(parents=True)
+    (root / "file").write_text("x")
+    return "--out below a file", str(root / "file" / "sub"), str(root / "file"), str(root), ()
+
+
+def _trap_device(root: Path, rng=None) -> tuple:
+    root.mkdir(parents=True)
+    return "--out /dev/null", "/dev/null", "/dev/null", str(root), ()
+
+
+_OUTPUT_TRAPS = (_trap_empty, _trap_file, _trap_input, _trap_foreign, _trap_seeds_at_report,
+                 _trap_dir_at_output, _trap_link_at_output, _trap_hardlink_input,
+                 _trap_not_a_folder_parent, _trap_device)
 
 
 @dataclass(frozen=True)
@@ -307,7 +428,8 @@ class Outcome:
     code: object  # the return value or SystemExit code
     stderr: str
     traceback: bool  # an exception other than SystemExit escaped main
-    output_left: bool  # the case's --out folder exists afterwards
+    output_left: bool  # the case's --out folder was made by the run
+    changed: bool = False  # the case's ``keep`` folder is not as it was
 
 
 def output_folder(case: FuzzCase) -> Path | None:
@@ -326,6 +448,9 @@ def run_in_process(case: FuzzCase) -> Outcome:
 
     err, out = io.StringIO(), io.StringIO()
     escaped = False
+    folder = output_folder(case)
+    existed = bool(folder and str(folder).strip() and os.path.lexists(folder))
+    before = _snapshot(case.keep) if case.keep else None
     with contextlib.redirect_stderr(err), contextlib.redirect_stdout(out):
         try:
             code: object = cli.main(list(case.argv))
@@ -335,9 +460,24 @@ def run_in_process(case: FuzzCase) -> Outcome:
             escaped = True
             code = None
             err.write(traceback.format_exc())
-    folder = output_folder(case)
-    return Outcome(code, err.getvalue(), escaped or "Traceback" in err.getvalue(),
-                   bool(folder and folder.exists()))
+    left = bool(folder and str(folder).strip() and not existed and os.path.lexists(folder))
+    changed = before is not None and _snapshot(case.keep) != before
+    return Outcome(code, err.getvalue(), escaped or "Traceback" in err.getvalue(), left, changed)
+
+
+def _snapshot(folder: str) -> dict[str, object]:
+    """Every entry under ``folder``: kind, and the bytes of regular files."""
+    found: dict[str, object] = {}
+    for dirpath, dirnames, filenames in os.walk(folder):
+        for name in dirnames + filenames:
+            path = Path(dirpath) / name
+            if path.is_symlink():
+                found[str(path)] = ("link", os.readlink(path))
+            elif path.is_dir():
+                found[str(path)] = "dir"
+            else:
+                found[str(path)] = path.read_bytes()
+    return found
 
 
 def failure(case: FuzzCase, outcome: Outcome) -> str | None:
@@ -355,6 +495,8 @@ def failure(case: FuzzCase, outcome: Outcome) -> str | None:
         return f"the error does not name {case.names!r}: {lines[0]}"
     if outcome.output_left:
         return "an output folder was written"
+    if outcome.changed:
+        return f"the folder {case.keep} was changed"
     return None
 
 

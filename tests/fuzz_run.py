@@ -4,6 +4,13 @@ The cases are those of the suite's fuzz test (tests/fuzz_cases.py), with ``--n``
 random draws on top of the fixed ones, each run in-process through
 ``recon.cli.main``; a case is counted as a pass when it is refused in one line
 with exit 2 and no output (or, for byte-flipped files, ends without a traceback).
+
+``--signals N`` adds N real ``coronary3d reconstruct --demo`` processes, all into
+one output folder, each sent SIGTERM, SIGINT or SIGKILL at a random moment of
+its run (most of them within the writing of the outputs): a pass when no
+traceback is printed, no temporary file is left (after a SIGKILL: once the next
+run has swept it) and the folder holds one complete set that matches its
+manifest, or the earlier one, or nothing.
 """
 
 from __future__ import annotations
@@ -20,10 +27,88 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from fuzz_cases import failure, make_cases, run_in_process  # noqa: E402
 
 
+def _set_state(out: Path) -> str:
+    """'absent', 'complete' (files match the manifest) or why the folder is not one set."""
+    import hashlib
+    import json
+
+    if not out.exists():
+        return "absent"
+    temps = sorted(p.name for p in out.glob(".*.tmp"))
+    if temps:
+        return f"temporary files {temps}"
+    try:
+        manifest = json.loads((out / "outputs.json").read_text())
+    except (OSError, ValueError) as exc:
+        return f"no manifest ({exc})"
+    if manifest.get("complete") is not True:
+        return "manifest says incomplete"
+    names = sorted(p.name for p in out.iterdir())
+    if names != sorted([*manifest["files"], "outputs.json"]):
+        return f"files {names} differ from the manifest"
+    for name, entry in manifest["files"].items():
+        if hashlib.sha256((out / name).read_bytes()).hexdigest() != entry["sha256"]:
+            return f"{name} differs from the manifest"
+    return "complete"
+
+
+def signal_runs(n: int, seed: int, folder: Path) -> Counter[str]:
+    """N demo reconstructions into one folder, each signalled at a random moment."""
+    import os
+    import signal
+    import subprocess
+
+    import numpy as np
+
+    rng = np.random.default_rng(seed)
+    out = folder / "signal-out"
+    env = {k: v for k, v in os.environ.items() if k != "CORONARY3D_DEBUG"}
+    argv = [sys.executable, "-m", "recon.cli", "reconstruct", "--demo", "--out", str(out),
+            "--quiet"]
+    counts: Counter[str] = Counter()
+    t0 = time.perf_counter()  # one undisturbed run: how long a run takes, when it writes
+    first = subprocess.run(argv, capture_output=True, text=True, env=env)
+    duration = time.perf_counter() - t0
+    assert first.returncode == 0, first.stderr
+    sigs = (signal.SIGTERM, signal.SIGINT, signal.SIGKILL)
+    for k in range(n):
+        sig = sigs[k % 3]
+        # a quarter anywhere in the run, the rest from the moment a temporary appears
+        when = "anytime" if rng.random() < 0.25 else "writing"
+        proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                text=True, env=env)
+        if when == "anytime":
+            time.sleep(float(rng.uniform(0.0, duration * 1.1)))
+        else:
+            delay = float(rng.uniform(0.0, 0.05))
+            while proc.poll() is None and not list(out.glob(".*.tmp")):
+                time.sleep(0.001)
+            time.sleep(delay)
+        if proc.poll() is None:
+            proc.send_signal(sig)
+        _, stderr = proc.communicate(timeout=300)
+        state = _set_state(out)
+        name = signal.Signals(sig).name
+        if "Traceback" in stderr:
+            counts[f"fail: traceback after {name}"] += 1
+        elif sig == signal.SIGKILL and state != "complete" and state != "absent":
+            counts[f"{name}: left for the next run ({state[:30]})"] += 1
+        elif state not in ("complete", "absent"):
+            counts[f"fail: {name} {when}: {state}"] += 1
+        else:
+            counts[f"{name} {when}: exit {proc.returncode}, set {state}"] += 1
+    final = subprocess.run(argv, capture_output=True, text=True, env=env)
+    state = _set_state(out)
+    counts[f"final run: exit {final.returncode}, set {state}"] += 1
+    return counts
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--n", type=int, default=2000, help="random cases beyond the fixed ones")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--signals", type=int, default=0,
+                        help="real processes signalled while they run (see the docstring)")
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         cases = make_cases(Path(tmp), n_random=args.n, seed=args.seed)
@@ -41,14 +126,22 @@ def main() -> int:
             if reason:
                 failures.append(f"{case.family} / {case.label}: {reason}")
         elapsed = time.perf_counter() - t0
-    print(f"{len(cases)} cases in {elapsed:.1f} s")
-    for key, count in sorted(outcomes.items()):
-        print(f"  {key}: {count}")
-    for (family, result), count in sorted(by_family.items()):
-        print(f"  {family:<16} {result}: {count}")
+        print(f"{len(cases)} cases in {elapsed:.1f} s")
+        for key, count in sorted(outcomes.items()):
+            print(f"  {key}: {count}")
+        for (family, result), count in sorted(by_family.items()):
+            print(f"  {family:<16} {result}: {count}", flush=True)
+        signal_counts = signal_runs(args.signals, args.seed, Path(tmp)) if args.signals \
+            else Counter()
+    if signal_counts:
+        print(f"{args.signals} signalled processes (+1 final run):")
+        for key, count in sorted(signal_counts.items()):
+            print(f"  {key}: {count}")
     for line in failures[:30]:
         print("FAIL", line)
-    return 1 if failures else 0
+    signal_failed = any(key.startswith("fail") or (key.startswith("final") and
+                        not key.endswith("complete")) for key in signal_counts)
+    return 1 if failures or signal_failed else 0
 
 
 if __name__ == "__main__":

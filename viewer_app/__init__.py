@@ -7,6 +7,7 @@ server and its commands), ``scene`` (the 3D scene), ``panels`` (the GUI),
 GUI-free state: marks, undo, seeds, epipolar lines, autosave).
 """
 
-from viewer_app.app import EXPORT_KINDS, ViewerApp, run_viewer
+from viewer_app.app import EXPORT_KINDS, ViewerApp
+from viewer_app.serve import run_viewer
 
 __all__ = ["EXPORT_KINDS", "ViewerApp", "run_viewer"]

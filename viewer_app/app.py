@@ -10,6 +10,8 @@ goes through ``recon`` (the same code as ``coronary3d reconstruct``).
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
 import logging
 import re
@@ -34,10 +36,10 @@ from recon.io import (
     outputs_as_bytes,
     save_seeds,
 )
-from recon.io.overrides import header_replacements
 from recon.seeds import Seeds
 from recon.types import Angiogram
 from viewer_app import scene
+from viewer_app.access import PATCHED_VISER_VERSION, FileAccess, ServerGuard, guarded_serve
 from viewer_app.camera import PageCameras
 from viewer_app.panels import Panels, build_panels
 from viewer_app.scene import LAYOUTS, ModelNodes, View
@@ -53,7 +55,7 @@ if TYPE_CHECKING:
     from recon.io.overrides import GeometryOverrides
     from recon.pipeline import Reconstruction
 
-__all__ = ["ViewerApp", "run_viewer", "EXPORT_KINDS"]
+__all__ = ["ViewerApp", "EXPORT_KINDS"]
 
 log = logging.getLogger(__name__)
 
@@ -77,6 +79,9 @@ class ViewerApp:
         ``~/.cache/coronary3d/autosave/<pair>.json``.
     overrides_a, overrides_b : geometry values for file A / B (``coronary3d view
         --geometry-a`` ...); a header value they replace is named in a warning.
+    out_dir : the only folder "Save seeds to path" writes into (None: the
+        current folder). Paths typed in the page are confined to it and to the
+        folders of A, B and the seeds file (:mod:`viewer_app.access`).
 
     Raises
     ------
@@ -96,6 +101,7 @@ class ViewerApp:
         autosave_path: str | Path | None = None,
         overrides_a: GeometryOverrides | None = None,
         overrides_b: GeometryOverrides | None = None,
+        out_dir: str | Path | None = None,
     ) -> None:
         if (path_a is None) != (path_b is None):
             raise ValueError("give both angiograms (A and B) or none for the demo case")
@@ -123,7 +129,22 @@ class ViewerApp:
         seeds = load_seeds(seeds_path) if seeds_path is not None else None
         self.pending_pair: tuple[str, str] | None = None  # a pair waiting for its geometry
 
-        self.server = viser.ViserServer(host=host, port=port, verbose=False)
+        self.access = FileAccess(
+            [Path(p).parent for p in (path_a, path_b, seeds_path) if p is not None]
+            + [Path(self._tmpdir.name)],
+            out_dir if out_dir is not None else Path.cwd(),
+        )
+        self.server_guard = ServerGuard(host)
+        # viser's start-up banner gives the address without the token: not printed
+        with guarded_serve(self.server_guard), contextlib.redirect_stdout(io.StringIO()):
+            self.server = viser.ViserServer(host=host, port=port, verbose=False)
+        if not self.server_guard.installed:  # a viser that no longer starts servers this way
+            self.server.stop()
+            raise RuntimeError(f"viser {viser.__version__}: the viewer's access check could not "
+                               f"be installed (written for {PATCHED_VISER_VERSION})")
+        self.server_guard.port = self.server.get_port()
+        self.autosave_notices: list[str] = []
+        self.server.on_client_connect(self._greet)
         self._setup_page()
         self.panels: Panels = build_panels(self.server.gui, self)
         self._set_pair(angio_a, angio_b, Path(path_a).name, Path(path_b).name, seeds, seeds_path)
@@ -161,8 +182,9 @@ class ViewerApp:
     @property
     def url(self) -> str:
         host = self.server.get_host()
-        shown = "127.0.0.1" if host in ("0.0.0.0", "") else host
-        return f"http://{shown}:{self.port}/"
+        shown = "127.0.0.1" if host in ("0.0.0.0", "", "::") else host
+        shown = f"[{shown}]" if ":" in shown else shown
+        return self.server_guard.url(shown)
 
     def stop(self) -> None:
         """Autosave and stop the server."""
@@ -170,6 +192,11 @@ class ViewerApp:
             self._autosave()
         self.server.stop()
         self._tmpdir.cleanup()
+
+    def _greet(self, client: viser.ClientHandle) -> None:
+        """A page that connects learns what happened to the autosave at start."""
+        for notice in self.autosave_notices:
+            self.notify("Autosave kept aside", notice, "warning", client)
 
     def notify(
         self, title: str, body: str, level: str = "info", client: object | None = None
@@ -221,6 +248,10 @@ class ViewerApp:
             path = self._autosave_arg or default_autosave_path(angio_a.path, angio_b.path)
             self.autosave = Autosave(path, angio_a.path, angio_b.path)
             self.restored_autosave = self.autosave.load_into(self.state, seeds_path)
+            if self.autosave.notice:  # kept aside: say so now and to every page that connects
+                self.autosave_notices.append(self.autosave.notice)
+                log.warning("autosave: %s", self.autosave.notice)
+                self.notify("Autosave kept aside", self.autosave.notice, "warning")
             self.state._history.clear()
             for v in self.views.values():
                 scene.add_view_nodes(self.server.scene, v, self._make_click_callback(v.key))
@@ -257,8 +288,10 @@ class ViewerApp:
 
         def run() -> bool:
             try:
-                angio_a = load_angiogram(path_a, frame=frame_a, overrides=overrides_a)
-                angio_b = load_angiogram(path_b, frame=frame_b, overrides=overrides_b)
+                angio_a = load_angiogram(self.access.readable(path_a, "file A"), frame=frame_a,
+                                         overrides=overrides_a)
+                angio_b = load_angiogram(self.access.readable(path_b, "file B"), frame=frame_b,
+                                         overrides=overrides_b)
             except LoadError as exc:
                 if "missing" in str(exc) and self._offer_geometry(path_a, path_b, client):
                     raise LoadError(re.sub(r"give --[\w-]+ or a geometry JSON",
@@ -463,14 +496,19 @@ class ViewerApp:
         with self._lock:
             return self.state.to_seeds()
 
-    def save_seeds(self, path: str | Path) -> None:
-        save_seeds(self.seeds(), path)
+    def save_seeds(self, path: str | Path) -> Path:
+        """Write the marks as seeds.json inside the output folder; returns the path written.
+
+        Raises ValueError for a path outside the output folder."""
+        target = self.access.writable(path, "seeds file")
+        save_seeds(self.seeds(), target)
+        return target
 
     def load_seeds(self, path: str | Path, client: object | None = None) -> bool:
         """Replace the marks by a seeds.json; errors become a notification (returns False)."""
 
         def run() -> bool:
-            seeds = load_seeds(path)
+            seeds = load_seeds(self.access.readable(path, "seeds file"))
             with self._lock:
                 self.state.load_seeds(seeds)
                 self._redraw_marks()
@@ -652,41 +690,3 @@ class ViewerApp:
 
         self.guard("Download", client, run)
 
-
-def run_viewer(
-    path_a: str | None,
-    path_b: str | None,
-    seeds_path: str | None,
-    host: str = "127.0.0.1",
-    port: int = 8080,
-    frame_a: int | None = None,
-    frame_b: int | None = None,
-    on_ready: Callable[[str], None] | None = None,
-    autosave_path: str | Path | None = None,
-    stop_event: threading.Event | None = None,
-    overrides_a: GeometryOverrides | None = None,
-    overrides_b: GeometryOverrides | None = None,
-) -> None:
-    """Serve the viewer until interrupted (Ctrl-C) or ``stop_event`` is set.
-
-    ``on_ready(url)`` is called once the server listens (the CLI prints the
-    URL). Both paths None opens the bundled demo case. Raises LoadError /
-    SeedsError (one line) when the initial files cannot be used.
-    """
-    app = ViewerApp(path_a, path_b, seeds_path, host=host, port=port, frame_a=frame_a,
-                    frame_b=frame_b, autosave_path=autosave_path, overrides_a=overrides_a,
-                    overrides_b=overrides_b)
-    for v in app.views.values():  # a header value replaced by a flag is said, not silent
-        for note in header_replacements(v.angio.geometry_notes):
-            log.warning("%s: %s", v.display_name, note)
-            app.notify("Header value replaced", f"{v.key.upper()}: {note}", "warning")
-    if on_ready is not None:
-        on_ready(app.url)
-    stop = stop_event or threading.Event()
-    try:
-        while not stop.wait(0.5):
-            pass
-    except KeyboardInterrupt:
-        pass
-    finally:
-        app.stop()

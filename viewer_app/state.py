@@ -38,7 +38,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from recon.geometry import ViewGeometry, epipolar_lines
-from recon.io.files import atomic_write_bytes
+from recon.io.files import atomic_write_bytes, read_json
 from recon.seeds import Feature, Seeds, Segment, seeds_from_dict
 
 __all__ = [
@@ -65,6 +65,7 @@ MODE_LABELS: dict[str, str] = {
 KIND_WORDS = {"proximal": "proximal end", "distal": "distal end", "feature": "landmark",
               "waypoint": "waypoint"}
 VIEWS: tuple[str, str] = ("a", "b")
+MAX_GROUPS = 1000  # segments or features of one pair (seeds files hold at most 100 / 1000)
 
 # A snapper takes (view, raw click (2,)) and returns (placed point (2,), snap distance in
 # px or None when the click was kept raw, a one-line message for the user or None).
@@ -189,6 +190,7 @@ class MarkState:
         self.mode: str = "guided"
         self.marks: list[Mark] = []
         self.segment_names: list[str] = ["Segment 1"]
+        self.feature_names: dict[int, str] = {}  # feature group -> name (from a seeds file)
         self.current_segment: int = 0
         self.selected_id: int | None = None
         self._next_id: int = 1
@@ -479,7 +481,8 @@ class MarkState:
         for g in groups:
             pts = {m.view: m.point_px for m in self.marks if m.kind == "feature" and m.group == g}
             if len(pts) == 2:
-                features.append(Feature(name=f"feature {g + 1}", a_px=pts["a"], b_px=pts["b"]))
+                name = self.feature_names.get(g) or f"feature {g + 1}"
+                features.append(Feature(name=name, a_px=pts["a"], b_px=pts["b"]))
         return Seeds(segments=tuple(segments), features=tuple(features))
 
     def missing(self) -> list[str]:
@@ -521,41 +524,81 @@ class MarkState:
             add("feature", "b", g, feat.b_px)
         self.marks = marks
         self.segment_names = [s.name for s in seeds.segments] or ["Segment 1"]
+        self.feature_names = {g: f.name for g, f in enumerate(seeds.features) if f.name}
         self.current_segment = 0
         self.selected_id = None
         self._next_id = next_id
 
     # ------------------------------------------------------------ autosave form
     def to_dict(self) -> dict:
-        """Seeds document plus the full viewer state (incomplete marks, raw clicks)."""
+        """Seeds document plus the full viewer state (incomplete marks, raw clicks, names)."""
         doc = self.to_seeds().to_dict()
         doc["viewer"] = {
             "marks": [m.to_dict() for m in self.marks],
             "segment_names": list(self.segment_names),
+            "feature_names": {str(g): n for g, n in sorted(self.feature_names.items())},
             "current_segment": self.current_segment,
             "mode": self.mode,
         }
         return doc
 
-    def restore_dict(self, doc: dict, source: str = "autosave") -> None:
-        """Inverse of :meth:`to_dict`; a plain seeds document is accepted too."""
+    def restore_dict(self, doc: dict, source: str = "autosave") -> int:
+        """Inverse of :meth:`to_dict`; a plain seeds document is accepted too.
+
+        Marks that cannot be read (a damaged entry) are skipped, the others
+        restored; returns how many were skipped. Raises ValueError when nothing
+        of the viewer state can be read.
+        """
         viewer = doc.get("viewer") if isinstance(doc, dict) else None
         if not isinstance(viewer, dict):
             self.load_seeds(seeds_from_dict(doc, source=source))
-            return
-        try:
-            marks = [Mark.from_dict(m) for m in viewer["marks"]]
-            names = [str(n) for n in viewer["segment_names"]] or ["Segment 1"]
-        except (KeyError, TypeError, ValueError, IndexError) as exc:
-            raise ValueError(f"{source}: damaged viewer state ({exc})") from None
+            return 0
+        entries = viewer.get("marks")
+        if not isinstance(entries, list):
+            raise ValueError(f"{source}: damaged viewer state (no list of marks)")
+        marks: list[Mark] = []
+        for entry in entries:
+            mark = _mark_or_none(entry)
+            if mark is None or any(m.id == mark.id for m in marks):
+                continue
+            marks.append(mark)
+        names_in = viewer.get("segment_names")
+        names = [n for n in names_in if isinstance(n, str)] if isinstance(names_in, list) else []
+        needed = max((m.group + 1 for m in marks if m.kind != "feature"), default=1)
+        names += [f"Segment {k + 1}" for k in range(len(names), needed)]
+        features_in = viewer.get("feature_names")
+        feature_names = {}
+        if isinstance(features_in, dict):
+            for key, name in features_in.items():
+                if isinstance(key, str) and key.isdigit() and isinstance(name, str):
+                    feature_names[int(key)] = name
         self._push()
         self.marks = marks
-        self.segment_names = names
-        self.current_segment = min(int(viewer.get("current_segment", 0)), len(names) - 1)
+        self.segment_names = names or ["Segment 1"]
+        self.feature_names = feature_names
+        current = viewer.get("current_segment", 0)
+        current = current if isinstance(current, int) and not isinstance(current, bool) else 0
+        self.current_segment = min(max(current, 0), len(self.segment_names) - 1)
         if viewer.get("mode") in MODES:
             self.mode = viewer["mode"]
         self.selected_id = None
         self._next_id = max((m.id for m in marks), default=0) + 1
+        return len(entries) - len(marks)
+
+
+def _mark_or_none(entry: object) -> Mark | None:
+    """A mark from its autosave entry, or None when the entry is damaged."""
+    if not isinstance(entry, dict):
+        return None
+    try:
+        mark = Mark.from_dict(entry)
+    except (KeyError, TypeError, ValueError, IndexError, OverflowError):
+        return None
+    coords = (*mark.point_px, *mark.raw_px)
+    if (mark.kind not in MODES or mark.view not in VIEWS or not 0 <= mark.group < MAX_GROUPS
+            or mark.id < 1 or not all(np.isfinite(coords))):
+        return None
+    return mark
 
 
 def pair_key(path_a: str | os.PathLike, path_b: str | os.PathLike) -> str:
@@ -570,42 +613,105 @@ def default_autosave_path(path_a: str | os.PathLike, path_b: str | os.PathLike) 
     return base / "coronary3d" / "autosave" / f"{pair_key(path_a, path_b)}.json"
 
 
+AUTOSAVE_VERSION = 2  # 1: before the key existed (same layout, no feature names)
+
+
 class Autosave:
     """Autosave file of the marks of one pair.
 
     The file is a seeds.json document (readable by ``coronary3d reconstruct``)
-    with two extra keys: ``"pair"`` (the absolute paths of A and B) and
-    ``"viewer"`` (the full mark state).
+    with extra keys: ``"autosave_version"`` (:data:`AUTOSAVE_VERSION`),
+    ``"saved_at"`` (UTC, ISO 8601), ``"pair"`` (the absolute paths of A and
+    B) and ``"viewer"`` (the full mark state). It is replaced atomically on
+    every change. An autosave that cannot be restored whole (damaged, older
+    than the seeds file given, for another pair, from a newer version) is
+    never overwritten: :meth:`load_into` renames it aside first and
+    :attr:`notice` says so, in one line, for the page.
     """
 
     def __init__(self, path: str | os.PathLike, path_a: str, path_b: str) -> None:
         self.path = Path(path)
         self.pair = [str(Path(path_a).resolve()), str(Path(path_b).resolve())]
+        self.notice: str | None = None  # what load_into did that the user must know
+        self.kept_aside: Path | None = None
 
     def save(self, state: MarkState) -> None:
+        """Write the marks (atomically). Raises OutputError naming the file."""
         doc = state.to_dict()
+        doc["autosave_version"] = AUTOSAVE_VERSION
+        doc["saved_at"] = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
         doc["pair"] = self.pair
         atomic_write_bytes(self.path, (json.dumps(doc, indent=2) + "\n").encode())
+
+    def keep_aside(self, reason: str) -> Path | None:
+        """Rename the autosave to ``<name>.<reason>-<UTC time>.json`` beside it; the new name
+        (None when it could not be renamed: then the autosave is not written either)."""
+        stamp = time.strftime("%Y%m%dT%H%M%SZ", time.gmtime())
+        for k in range(100):
+            extra = f"-{k}" if k else ""
+            target = self.path.with_name(f"{self.path.stem}.{reason}-{stamp}{extra}.json")
+            if target.exists():
+                continue
+            try:
+                os.rename(self.path, target)  # same folder: atomic, the content untouched
+            except OSError:
+                return None
+            self.kept_aside = target
+            return target
+        return None
+
+    def _aside(self, reason: str, why: str) -> bool:
+        target = self.keep_aside(reason)
+        if target is None:
+            self.path = self.path.with_name(f"{self.path.stem}.new.json")
+            self.notice = (f"{why}; it could not be renamed aside: marks are autosaved to "
+                           f"{self.path}")
+        else:
+            self.notice = f"{why}; it was kept as {target}"
+        return False
 
     def load_into(self, state: MarkState, seeds_path: str | os.PathLike | None) -> bool:
         """Restore the autosave into ``state`` if it is for this pair and newer than the seeds.
 
-        Returns True if restored. A damaged autosave is ignored (False).
+        Returns True if (some of) its marks were restored. Whatever cannot be
+        restored whole is renamed aside first, with a line in :attr:`notice`.
         """
-        if not self.path.is_file():
-            return False
-        if seeds_path is not None and Path(seeds_path).is_file():
-            if self.path.stat().st_mtime <= Path(seeds_path).stat().st_mtime:
-                return False
-        try:
-            doc = json.loads(self.path.read_text(encoding="utf-8"))
-        except (OSError, json.JSONDecodeError):
-            return False
-        if not isinstance(doc, dict) or doc.get("pair") != self.pair:
-            return False
-        try:
-            state.restore_dict(doc, source=str(self.path))
-        except ValueError:
-            return False
-        return True
+        from recon.errors import CoronaryError
 
+        self.notice = None
+        try:
+            if not self.path.exists() and not self.path.is_symlink():
+                return False
+            if seeds_path is not None and Path(seeds_path).is_file():
+                if self.path.stat().st_mtime <= Path(seeds_path).stat().st_mtime:
+                    return self._aside("older", f"the autosave {self.path} is older than the "
+                                       f"seeds file {Path(seeds_path).name}, whose marks are shown")
+        except OSError as exc:
+            return self._aside("unreadable", f"the autosave {self.path} cannot be read "
+                               f"({exc.strerror})")
+        try:
+            doc = read_json(self.path, CoronaryError, "autosave")
+        except CoronaryError as exc:
+            return self._aside("damaged", f"the autosave could not be read ({exc})")
+        if not isinstance(doc, dict):
+            return self._aside("damaged", f"the autosave {self.path} is not a marks document")
+        if doc.get("pair") != self.pair:
+            return self._aside("other-pair", f"the autosave {self.path} is for another pair")
+        version = doc.get("autosave_version", 1)
+        if not isinstance(version, int) or version > AUTOSAVE_VERSION:
+            return self._aside("newer", f"the autosave {self.path} was written by a newer "
+                               f"coronary3d (version {version!r})")
+        try:
+            skipped = state.restore_dict(doc, source=str(self.path))
+        except (ValueError, TypeError, RecursionError) as exc:
+            return self._aside("damaged", f"the autosave could not be restored "
+                               f"({str(exc).splitlines()[0] if str(exc) else type(exc).__name__})")
+        if skipped:
+            target = self.keep_aside("damaged")
+            kept = f"the original was kept as {target}" if target else \
+                "the original could not be renamed aside"
+            self.notice = (f"{skipped} damaged mark(s) of the autosave were skipped and the "
+                           f"others restored; {kept}")
+            if target is None:
+                self.path = self.path.with_name(f"{self.path.stem}.new.json")
+        return True

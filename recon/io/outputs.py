@@ -1,7 +1,8 @@
 """The output files of a reconstruction: centerline CSV and VTP, report JSON, meshes, SR.
 
 ``outputs_as_bytes`` renders every file in memory (the viewer's downloads);
-``write_outputs`` writes them into a folder, each file whole or not at all.
+``write_outputs`` writes them into a folder as one set (:mod:`recon.io.output_set`:
+temporary names, a manifest written last, nothing half-written left).
 Mesh formats are the ones of :data:`MESH_FORMATS`, the one list of the
 project (the command line's ``--format`` and the viewer's menu use it).
 The DICOM SR (:mod:`recon.io.sr`) joins the set when its sources are given.
@@ -11,13 +12,16 @@ from __future__ import annotations
 
 import io
 import json
+import os
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 import trimesh
 
-from recon.io.files import atomic_write_bytes
+from recon import __version__
+from recon.io.output_set import check_output_folder, write_file_set
 
 if TYPE_CHECKING:
     from recon.io.sr import SRSources
@@ -32,9 +36,14 @@ __all__ = [
     "centerline_vtp",
     "outputs_as_bytes",
     "write_outputs",
+    "output_names",
+    "check_output_dir",
 ]
 
 MESH_FORMATS: tuple[str, ...] = ("stl", "obj", "ply", "glb")
+
+SR_NAME = "measurements-sr.dcm"  # recon.io.sr.SR_FILE_NAME, without loading highdicom
+REPORT_PDF_NAME = "report.pdf"  # recon.io.report_pdf, drawn only when asked for
 
 CENTERLINE_COLUMNS = (
     "s_mm",
@@ -151,27 +160,56 @@ def outputs_as_bytes(
     return files
 
 
+def output_names(formats: tuple[str, ...] = ("stl",), sr: bool = False,
+                 report: bool = False) -> list[str]:
+    """The file names :func:`write_outputs` writes for these mesh formats (and the SR,
+    and report.pdf)."""
+    names = ["centerline.csv", "centerline.vtp", *(f"mesh.{f}" for f in formats), "report.json"]
+    return names + [SR_NAME] * sr + [REPORT_PDF_NAME] * report
+
+
+def known_output_names() -> list[str]:
+    """Every file name a reconstruction's output folder can hold (any format, the SR)."""
+    return output_names(MESH_FORMATS, sr=True, report=True)
+
+
+def check_output_dir(
+    out_dir: Path,
+    formats: tuple[str, ...] = ("stl",),
+    sr: bool = False,
+    inputs: Sequence[tuple[str, str | os.PathLike]] = (),
+    report: bool = False,
+) -> None:
+    """Refuse, before any work, a folder the outputs must not go to (see
+    :func:`recon.io.output_set.check_output_folder`); ``inputs`` are (role, path)."""
+    check_output_folder(out_dir, output_names(formats, sr, report), inputs,
+                        known_output_names())
+
+
 def write_outputs(
     rec: Reconstruction | TreeReconstruction,
     out_dir: Path,
     formats: tuple[str, ...] = ("stl",),
     sr_sources: SRSources | None = None,
+    inputs: Sequence[tuple[str, str | os.PathLike]] = (),
+    extra: Mapping[str, bytes] | None = None,
 ) -> list[Path]:
-    """Write the outputs into ``out_dir``; each file appears whole or not at all.
+    """Write the outputs into ``out_dir`` as one set (:mod:`recon.io.output_set`).
 
-    Every file is rendered to bytes first, so a failure leaves no file behind.
-    ``sr_sources`` adds the DICOM SR (:func:`outputs_as_bytes`). Raises
-    :class:`~recon.errors.OutputError` naming the file that cannot be written.
+    ``extra`` adds files rendered elsewhere to the set (report.pdf).
+
+    Every file is rendered to bytes first, written under a temporary name, and
+    renamed into place; the manifest ``outputs.json`` is written last. A folder
+    holding anything but an earlier coronary3d output is refused, and so is an
+    output that would replace one of ``inputs`` ((role, path) pairs, e.g.
+    ("seeds file", path)). ``sr_sources`` adds the DICOM SR
+    (:func:`outputs_as_bytes`). Raises :class:`~recon.errors.OutputError`
+    naming the folder or the file; on an error the folder is as it was.
     """
     files = outputs_as_bytes(rec, formats, sr_sources)
     files.pop("seeds.json")
-    out_dir = Path(out_dir)
-    written = []
-    for name, data in files.items():
-        path = out_dir / name
-        atomic_write_bytes(path, data)
-        written.append(path)
-    return written
+    files.update(extra or {})
+    return write_file_set(Path(out_dir), files, inputs, known_output_names(), __version__)
 
 
 def _json_default(value: object) -> object:

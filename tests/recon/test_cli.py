@@ -96,7 +96,10 @@ def test_reconstruct_demo_writes_the_documented_files(tmp_path):
     assert proc.returncode == 0, proc.stderr
     assert "tracing" in proc.stderr  # progress on stderr
     names = sorted(p.name for p in out.iterdir())
-    assert names == ["centerline.csv", "centerline.vtp", "mesh.glb", "mesh.stl", "report.json"]
+    assert names == ["centerline.csv", "centerline.vtp", "mesh.glb", "mesh.stl", "outputs.json",
+                     "report.json"]
+    manifest = json.loads((out / "outputs.json").read_text())
+    assert manifest["complete"] is True and len(manifest["files"]) == 5
 
     rows = list(csv.DictReader(io.StringIO((out / "centerline.csv").read_text())))
     for column in ("s_mm", "x_mm", "y_mm", "z_mm", "radius_mm"):

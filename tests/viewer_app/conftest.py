@@ -40,6 +40,7 @@ def app(demo_case: dict[str, Path], tmp_path: Path) -> Iterator[ViewerApp]:
         host="127.0.0.1",
         port=0,
         autosave_path=tmp_path / "seeds.autosave.json",
+        out_dir=tmp_path,
     )
     try:
         yield viewer

@@ -200,13 +200,95 @@ def test_autosave_round_trip_keeps_incomplete_marks(tmp_path: Path) -> None:
         ("feature", "b", (30.0, 40.0)),
     ]
     assert restored.mode == "feature"
-    # another pair does not pick it up
-    assert not Autosave(tmp_path / "auto.json", str(b), str(a)).load_into(_state(), None)
-    # a seeds file newer than the autosave wins
+    # a seeds file older than the autosave does not hide it
     seeds_path = tmp_path / "seeds.json"
     seeds_path.write_text(json.dumps(Seeds().to_dict()))
     t = (tmp_path / "auto.json").stat().st_mtime
+    os.utime(seeds_path, (t - 10, t - 10))
+    assert store.load_into(_state(), seeds_path) and store.notice is None
+    # a seeds file newer than the autosave wins, and the autosave is kept aside, not lost
+    kept = (tmp_path / "auto.json").read_bytes()
     os.utime(seeds_path, (t + 10, t + 10))
     assert not store.load_into(_state(), seeds_path)
-    os.utime(seeds_path, (t - 10, t - 10))
-    assert store.load_into(_state(), seeds_path)
+    assert store.kept_aside is not None and store.kept_aside.read_bytes() == kept
+    assert store.kept_aside.name.startswith("auto.older-") and not (tmp_path / "auto.json").exists()
+    assert "older than the seeds file" in store.notice and str(store.kept_aside) in store.notice
+
+
+def _saved(tmp_path: Path) -> tuple[Autosave, MarkState]:
+    st = _state()
+    st.load_seeds(Seeds(
+        segments=(Segment("LAD mid", ((1.0, 2.0), (3.0, 4.0)), ((5.0, 6.0), (7.0, 8.0))),),
+        features=(Feature("D1 bifurcation", (10.0, 11.0), (12.0, 13.0)),
+                  Feature("septal", (20.0, 21.0), (22.0, 23.0))),
+    ))
+    store = Autosave(tmp_path / "auto.json", str(tmp_path / "a.dcm"), str(tmp_path / "b.dcm"))
+    store.save(st)
+    return store, st
+
+
+def test_feature_and_segment_names_survive_the_autosave(tmp_path: Path) -> None:
+    store, st = _saved(tmp_path)
+    doc = json.loads(store.path.read_text())
+    assert doc["autosave_version"] == 2 and doc["saved_at"].endswith("Z")
+    restored = _state()
+    assert store.load_into(restored, None)
+    assert restored.to_seeds() == st.to_seeds()
+    assert [f.name for f in restored.to_seeds().features] == ["D1 bifurcation", "septal"]
+
+
+@pytest.mark.parametrize("damage", ["invalid UTF-8", "deep nesting", "not JSON", "a list",
+                                    "marks not a list", "a folder", "newer version",
+                                    "another pair"])
+def test_an_autosave_that_cannot_be_restored_is_kept_aside_never_overwritten(
+    tmp_path: Path, damage: str
+) -> None:
+    store, _ = _saved(tmp_path)
+    doc = json.loads(store.path.read_text())
+    data: bytes | None = None
+    if damage == "invalid UTF-8":
+        data = store.path.read_bytes().replace(b"LAD", b"L\xffD")
+    elif damage == "deep nesting":
+        data = b'{"viewer": ' + b"[" * 5000 + b"]" * 5000 + b"}"
+    elif damage == "not JSON":
+        data = store.path.read_bytes()[:-40]
+    elif damage == "a list":
+        data = b"[1, 2]"
+    elif damage == "marks not a list":
+        doc["viewer"]["marks"] = 7
+    elif damage == "newer version":
+        doc["autosave_version"] = 99
+    elif damage == "another pair":
+        doc["pair"] = ["/x/a.dcm", "/x/b.dcm"]
+    if damage == "a folder":
+        store.path.unlink()
+        store.path.mkdir()
+        (store.path / "inside").write_text("x")
+        original = None
+    else:
+        original = data if data is not None else json.dumps(doc).encode()
+        store.path.write_bytes(original)
+    restored = _state()
+    assert store.load_into(restored, None) is False  # nothing raised
+    assert restored.marks == []
+    assert store.kept_aside is not None and store.kept_aside.exists()
+    if original is not None:
+        assert store.kept_aside.read_bytes() == original
+    assert store.notice and "\n" not in store.notice and str(store.kept_aside) in store.notice
+    store.save(restored)  # the next autosave does not touch the one kept aside
+    if original is not None:
+        assert store.kept_aside.read_bytes() == original
+
+
+def test_one_damaged_mark_costs_only_that_mark(tmp_path: Path) -> None:
+    store, st = _saved(tmp_path)
+    doc = json.loads(store.path.read_text())
+    doc["viewer"]["marks"][1]["point_px"] = ["x", None]
+    doc["viewer"]["marks"][2] = "garbage"
+    store.path.write_text(json.dumps(doc))
+    original = store.path.read_bytes()
+    restored = _state()
+    assert store.load_into(restored, None)
+    assert len(restored.marks) == len(st.marks) - 2
+    assert "2 damaged mark(s)" in store.notice
+    assert store.kept_aside is not None and store.kept_aside.read_bytes() == original

@@ -85,6 +85,9 @@ def test_write_outputs_writes_every_file_but_the_seeds(demo_rec, tmp_path):
     for path in paths:
         assert path.parent == out and path.read_bytes() == files[path.name]
     assert not list(out.glob(".*tmp"))
+    manifest = json.loads((out / "outputs.json").read_text())
+    assert manifest["complete"] is True and sorted(manifest["files"]) == names
+    assert sorted(p.name for p in out.iterdir()) == sorted([*names, "outputs.json"])
 
 
 def test_out_path_that_is_a_file_is_an_output_error(demo_rec, tmp_path):
@@ -93,20 +96,8 @@ def test_out_path_that_is_a_file_is_an_output_error(demo_rec, tmp_path):
     with pytest.raises(OutputError) as err:
         write_outputs(demo_rec, out)
     message = str(err.value)
-    assert message.startswith(f"{out / 'centerline.csv'}: cannot write")
-    assert str(out) in message and "\n" not in message
+    assert message.startswith(f"{out}: is a file, not a folder") and "\n" not in message
     assert out.read_text() == "a file, not a folder"
-
-
-def test_a_file_that_cannot_be_written_leaves_no_part_behind(demo_rec, tmp_path):
-    (tmp_path / "mesh.stl").mkdir()  # a folder where the mesh should go
-    with pytest.raises(OutputError, match=r"mesh\.stl: cannot write"):
-        write_outputs(demo_rec, tmp_path)
-    # the files before it are whole, the mesh is not there, no temporary file is left
-    assert (tmp_path / "centerline.csv").read_bytes() == centerline_csv(demo_rec)
-    assert (tmp_path / "mesh.stl").is_dir() and not list((tmp_path / "mesh.stl").iterdir())
-    assert not (tmp_path / "report.json").exists()
-    assert not list(tmp_path.glob(".*tmp"))
 
 
 def test_the_report_and_the_table_carry_the_95_pct_intervals(demo_rec):
@@ -128,3 +119,24 @@ def test_the_report_and_the_table_carry_the_95_pct_intervals(demo_rec):
     lo, hi = table[:, col["radius_lo95_mm"]], table[:, col["radius_hi95_mm"]]
     assert np.all(np.isfinite(lo)) and np.all(lo <= radius + 1e-4) and np.all(radius <= hi + 1e-4)
     assert np.median(hi - lo) > 0
+
+
+def test_a_folder_in_place_of_an_output_leaves_no_part_behind(demo_rec, tmp_path):
+    out = tmp_path / "out"
+    write_outputs(demo_rec, out, formats=("obj",))
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    (out / "mesh.obj").unlink()
+    (out / "mesh.obj").mkdir()  # a folder where the mesh should go
+    before.pop("mesh.obj")
+    with pytest.raises(OutputError, match=r"mesh\.obj: is a folder"):
+        write_outputs(demo_rec, out, formats=("obj",))
+    # nothing was written or removed: the earlier files are as they were, no temporary
+    assert {p.name: p.read_bytes() for p in out.iterdir() if p.is_file()} == before
+    assert not list(out.glob(".*tmp"))
+
+
+def test_the_sr_name_is_the_sr_modules():
+    from recon.io.outputs import SR_NAME
+    from recon.io.sr import SR_FILE_NAME
+
+    assert SR_NAME == SR_FILE_NAME

@@ -1,0 +1,94 @@
+"""Marks are never lost: a crash, a restart, a damaged autosave (real processes)."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from viewer_app import ViewerApp
+
+CRASHING_VIEWER = """
+import os, signal, sys
+import pytest
+
+from viewer_app import ViewerApp
+a, b, seeds, autosave = sys.argv[1:5]
+app = ViewerApp(a, b, seeds, host="127.0.0.1", port=0, autosave_path=autosave)
+app.set_mode("feature")
+app.click("a", 150.0, 160.0)  # a landmark still waiting for its partner in B
+app.new_segment("RCA distal")
+os.kill(os.getpid(), signal.SIGKILL)  # no stop(), no final autosave
+"""
+
+
+def test_marks_and_their_names_survive_a_crash_and_a_restart(
+    demo_case: dict[str, Path], tmp_path: Path
+) -> None:
+    autosave = tmp_path / "auto.json"
+    args = [str(demo_case["a"]), str(demo_case["b"]), str(demo_case["seeds"]), str(autosave)]
+    proc = subprocess.run([sys.executable, "-c", CRASHING_VIEWER, *args], capture_output=True,
+                          text=True, timeout=120)
+    assert proc.returncode == -signal.SIGKILL, proc.stderr
+    assert not list(tmp_path.glob(".*tmp"))
+    app = ViewerApp(*args[:3], host="127.0.0.1", port=0, autosave_path=autosave)
+    try:
+        assert app.restored_autosave
+        seeds_names = json.loads(demo_case["seeds"].read_text())
+        expected = [f["name"] for f in seeds_names["features"]]
+        assert [f.name for f in app.seeds().features] == expected  # not "feature N"
+        assert "RCA distal" in app.state.segment_names
+        assert any(m.kind == "feature" and m.view == "a" and m.raw_px == (150.0, 160.0)
+                   for m in app.state.marks)
+    finally:
+        app.stop()
+
+
+def test_a_damaged_autosave_does_not_stop_the_viewer_and_is_announced(
+    demo_case: dict[str, Path], tmp_path: Path
+) -> None:
+    autosave = tmp_path / "auto.json"
+    autosave.write_bytes(b'{"viewer": {"marks": ["\xff\xfe"]}}')
+    app = ViewerApp(str(demo_case["a"]), str(demo_case["b"]), str(demo_case["seeds"]),
+                    host="127.0.0.1", port=0, autosave_path=autosave)
+    try:
+        level, title, body = app.notifications[-1]
+        assert level == "warning" and title == "Autosave kept aside"
+        kept = app.autosave.kept_aside
+        assert kept is not None and str(kept) in body and "not UTF-8" in body
+        assert kept.read_bytes() == b'{"viewer": {"marks": ["\xff\xfe"]}}'
+        assert app.autosave_notices == [body]  # every page that connects is told
+        app.click("a", 100.0, 100.0)
+        assert json.loads(autosave.read_text())["autosave_version"] == 2
+        assert kept.read_bytes() == b'{"viewer": {"marks": ["\xff\xfe"]}}'
+    finally:
+        app.stop()
+
+
+def test_coronary3d_view_starts_with_a_deeply_nested_autosave(
+    demo_case: dict[str, Path], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from viewer_app.state import default_autosave_path
+
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    env = {k: v for k, v in os.environ.items() if k != "CORONARY3D_DEBUG"}
+    path = default_autosave_path(demo_case["a"], demo_case["b"])
+    path.parent.mkdir(parents=True)
+    path.write_text('{"viewer": ' + "[" * 100000 + "]" * 100000 + "}")
+    proc = subprocess.Popen([sys.executable, "-m", "recon.cli", "view", "--port", "0"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
+                            cwd=tmp_path)
+    try:
+        assert proc.stdout is not None
+        line = proc.stdout.readline()
+        assert "coronary3d viewer: http://127.0.0.1:" in line, proc.stderr.read()
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        _, stderr = proc.communicate(timeout=30)
+    assert "Traceback" not in stderr
+    assert [p.name for p in path.parent.glob("*.damaged-*.json")]
