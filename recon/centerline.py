@@ -38,6 +38,7 @@ from recon.intensity import (
     ValueScale,
     absorption,
     best_blur,
+    best_enhancement,
     best_power,
     geometric_mean,
     is_display_processed,
@@ -287,29 +288,30 @@ def _natural_scale(power: float, scale: ValueScale, log_gain: float | None) -> f
 def _power_rss(raw_coef: FloatArray, points_px: FloatArray, normals: FloatArray,
                radius_px: FloatArray, scale: ValueScale, *, search_shift: bool,
                log_gain: float | None = None):
-    """Callable giving, for (Box-Cox power, blur px), the residual variances (M,) of the
-    profile fits at points (M, 2) of a raw crop (``raw_coef``: its cubic spline
-    coefficients; inf where nothing fitted)."""
+    """Callable giving, for (Box-Cox power, blur px[, enhancement gain, its sigma px]),
+    the residual variances (M,) of the profile fits at points (M, 2) of a raw crop
+    (``raw_coef``: its cubic spline coefficients; inf where nothing fitted)."""
     reach = np.linspace(-1.0, 1.0, 41) * half_width_for(float(np.median(radius_px)))
     g = geometric_mean(sample_profiles(raw_coef, points_px, normals, reach, 3), scale)
 
-    def rss(key: tuple[float, float]) -> FloatArray:
-        power, blur_px = key
+    def rss(key: tuple[float, ...]) -> FloatArray:
+        power, blur_px, gain, sigma_px = (tuple(key) + (0.0, 0.0))[:4]
         fit = fit_along(raw_coef, points_px, normals, radius_px, blur_px, 0.25,
                         search_shift=search_shift, order=3,
                         natural_scale=g ** (power - 1.0) * _natural_scale(power, scale, log_gain),
-                        transform=lambda p: normalised_absorption(p, power, scale, g))
+                        transform=lambda p: normalised_absorption(p, power, scale, g),
+                        enhance=(gain, sigma_px))
         return np.where(fit.ok, fit.rss, np.inf)
 
     return rss
 
 
 def _cached(fn):
-    """``fn`` ((power, blur) -> array) remembering its results."""
-    memo: dict[tuple[float, float], FloatArray] = {}
+    """``fn`` ((power, blur[, gain, sigma]) -> array) remembering its results."""
+    memo: dict[tuple[float, ...], FloatArray] = {}
 
-    def wrapped(key: tuple[float, float]) -> FloatArray:
-        k = (round(float(key[0]), 9), round(float(key[1]), 9))
+    def wrapped(key: tuple[float, ...]) -> FloatArray:
+        k = tuple(round(float(v), 9) for v in (tuple(key) + (0.0, 0.0))[:4])
         if k not in memo:
             memo[k] = fn(k)
         return memo[k]
@@ -480,19 +482,34 @@ def trace_segment(
             rss_fn = make_rss(mapping.log_gain)
     power = POWER_OF[mapping.mapping]
     notes = []
-    if is_display_processed(relationship) and not isinstance(intensity, IntensityMapping) \
-            and intensity == "auto":
-        # Display-processed: neither mapping is right; the trace's profiles pick the power.
-        power, _ = best_power(lambda p: rss_fn((p, blur_px)), power)
+    # Display-processed: neither mapping is right, so the trace's profiles pick the power,
+    # and the display may be edge-enhanced (an unsharp mask, recon.profile_fit). Power,
+    # blur and enhancement shape the profile together: two rounds of each in turn.
+    fit_power = is_display_processed(relationship) and \
+        not isinstance(intensity, IntensityMapping) and intensity == "auto"
+    fit_enhance = is_display_processed(relationship)
+    prior_power, blur, enhance = power, blur_px, (0.0, 0.0)
+    for _ in range(2 if fit_enhance else 1):
+        if fit_power:
+            power, _ = best_power(lambda p, b=blur, e=enhance: rss_fn((p, b, *e)),
+                                  prior_power)
+        if estimate_blur:
+            blur, _ = best_blur(lambda b, p=power, e=enhance: rss_fn((p, round(b, 4), *e)),
+                                blur_px)
+            blur = round(blur, 3)
+        if fit_enhance:
+            enhance = best_enhancement(lambda e, p=power, b=blur: rss_fn((p, b, *e)))
+    if fit_power:
         notes.append(f"display-processed: Box-Cox power {power:.2f} fitted")
-    blur = blur_px
+    if enhance[0] > 0:
+        notes.append(f"edge enhancement gain {enhance[0]:.2f}, sigma {enhance[1]:.1f} px "
+                     "fitted")
     if estimate_blur:
-        blur, _ = best_blur(lambda b: rss_fn((power, round(b, 4))), blur_px)
-        blur = round(blur, 3)
         notes.append(f"blur {blur:.2f} px fitted")
     fit2 = fit_along(spline_coefficients(absorption(raw, power, scale)), points - origin,
                      normals, r_guess, blur, 0.1, search_shift=False, order=3,
-                     natural_scale=_natural_scale(power, scale, mapping.log_gain))
+                     natural_scale=_natural_scale(power, scale, mapping.log_gain),
+                     enhance=enhance)
     radius, ok2, rss2 = fit2.radius_px, fit2.ok, fit2.rss
     if not np.any(ok2):
         raise TraceError(f"view {view}: no vessel profile could be fitted along the trace",

@@ -40,6 +40,8 @@ __all__ = [
     "resolve_mapping",
     "best_power",
     "best_blur",
+    "best_enhancement",
+    "tag_mapping",
     "noise_trend",
     "NoiseTrend",
     "is_display_processed",
@@ -199,7 +201,37 @@ def best_blur(
     return float(np.exp(b)), table
 
 
-def _tag_mapping(relationship: str | None) -> str | None:
+#: Edge-enhancement gains and sigmas (px) searched along a trace of a display-processed
+#: image (unsharp masks of ~1-3 mm at the detector: 2-20 px at 0.15-0.4 mm pixels).
+ENHANCE_GAINS = (0.5, 0.75, 1.0, 1.5, 2.0, 3.0)
+ENHANCE_SIGMAS_PX = (2.0, 2.8, 4.0, 5.6, 8.0, 11.0, 16.0)
+#: An enhancement is kept only when it lowers the profiles' residual by this fraction
+#: (two more parameters shared by the whole trace).
+_ENHANCE_GAIN_MIN = 0.05
+
+
+def best_enhancement(
+    rss_of_enhance: Callable[[tuple[float, float]], FloatArray],
+    gains: tuple[float, ...] = ENHANCE_GAINS, sigmas_px: tuple[float, ...] = ENHANCE_SIGMAS_PX,
+) -> tuple[float, float]:
+    """The edge enhancement (gain, sigma px) of an unsharp mask ``y + g (y - G_s * y)``
+    that best explains a trace's profiles (:mod:`recon.profile_fit`), on a grid; (0, 0)
+    when none lowers the aggregated residual by :data:`_ENHANCE_GAIN_MIN`.
+
+    rss_of_enhance : (gain, sigma px) -> residual variances (M,) (inf: no fit).
+    """
+    grid = [(0.0, 0.0)] + [(g, s) for g in gains for s in sigmas_px]
+    rss = _aggregate([rss_of_enhance(e) for e in grid])
+    if not np.isfinite(rss[0]):
+        return 0.0, 0.0
+    k = int(np.argmin(np.where(np.isfinite(rss), rss, np.inf)))
+    if k == 0 or rss[k] > (1.0 - _ENHANCE_GAIN_MIN) * rss[0]:
+        return 0.0, 0.0
+    return grid[k]
+
+
+def tag_mapping(relationship: str | None) -> str | None:
+    """"lin" or "log" when the PixelIntensityRelationship says LIN or LOG, else None."""
     tag = (relationship or "").strip().upper()
     return {"LIN": "lin", "LOG": "log"}.get(tag)
 
@@ -330,7 +362,7 @@ def resolve_mapping(
     if choice != "auto":
         return IntensityMapping(choice, f"set by the user ({choice})",
                                 log_gain=_log_gain(image, vesselness) if choice == "log" else None)
-    by_tag = _tag_mapping(relationship)
+    by_tag = tag_mapping(relationship)
     if by_tag is not None:
         return IntensityMapping(by_tag, f"PixelIntensityRelationship is {tag}",
                                 log_gain=_log_gain(image, vesselness) if by_tag == "log" else None)

@@ -50,3 +50,24 @@ def test_blur_of_the_intensity_is_modelled_to_second_order(radius: float, mu: fl
     r1 = fit_profiles(prof, hw, 0.8, hw - 1.0, 0.05, natural_scale=None)[1][0]
     assert r2 == pytest.approx(radius, rel=0.005)
     assert r1 < 0.98 * radius
+
+
+@pytest.mark.parametrize(("radius", "gain", "sigma"), [(3.0, 1.0, 3.0), (5.0, 1.5, 4.0),
+                                                      (8.0, 1.0, 5.0)])
+def test_an_edge_enhanced_profile_is_fitted_with_its_unsharp_mask(
+        radius: float, gain: float, sigma: float) -> None:
+    """An unsharp mask y + g (y - G_s y) puts a bright halo round the vessel; the plain
+    model reads the radius several % off, the enhanced model within 0.5 %."""
+    x = np.arange(-80.0, 80.0, 0.01)
+    chord = 2.0 * np.sqrt(np.clip(radius**2 - x**2, 0.0, None))
+    a = ndi.gaussian_filter1d(0.08 * chord, 0.7 / 0.01)
+    y = a + gain * (a - ndi.gaussian_filter1d(a, sigma / 0.01, mode="nearest"))
+    hw = half_width_for(radius)
+    plain_off = profile_table(hw, 0.7, hw - 1.0, 0.05)[0]
+    enh_off = profile_table(hw, 0.7, hw - 1.0, 0.05, (gain, sigma))[0]
+    np.testing.assert_array_equal(plain_off, enh_off)
+    prof = (np.interp(plain_off, x, y) + 0.2 + 0.002 * plain_off)[None]
+    r_enh = fit_profiles(prof, hw, 0.7, hw - 1.0, 0.05, None, (gain, sigma))[1][0]
+    r_plain = fit_profiles(prof, hw, 0.7, hw - 1.0, 0.05, None)[1][0]
+    assert r_enh == pytest.approx(radius, rel=0.005)
+    assert abs(r_plain / radius - 1.0) > 0.02
