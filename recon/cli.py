@@ -392,6 +392,7 @@ def cmd_phantom(args: argparse.Namespace) -> int:
 
 
 def cmd_reconstruct(args: argparse.Namespace) -> int:
+    from recon.cli_inputs import file_bytes, input_files, segment_choice
     from recon.io.angiogram import load_angiogram
     from recon.io.demo import demo_paths
     from recon.io.limits import job_limits, limits_for
@@ -422,13 +423,13 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
         if not args.quiet:
             print(f"[{fraction * 100:5.1f}%] {stage}", file=sys.stderr, flush=True)
 
-    inputs = _input_files(file_a, file_b, seeds_path, getattr(args, "geometry_json", None),
+    inputs = input_files(file_a, file_b, seeds_path, getattr(args, "geometry_json", None),
                           getattr(args, "geometry_a", None), getattr(args, "geometry_b", None))
     check_output_dir(Path(args.out), formats, args.sr, inputs, report=args.report)
     overrides_a, overrides_b = _overrides_ab(args)
     t0 = time.perf_counter()
     # uncompressed 16-bit pixel data: about one pixel per two bytes of file
-    file_px = max(_file_bytes(file_a), _file_bytes(file_b)) // 2
+    file_px = max(file_bytes(file_a), file_bytes(file_b)) // 2
     hard = _REAL_PROCESS  # a stuck native call ends the process (no output is written yet)
     with job_limits(limits_for(file_px, args.max_memory_gb, args.max_cpu_s), "loading", hard):
         angio_a = load_angiogram(file_a, frame=args.frame_a, overrides=overrides_a)
@@ -442,8 +443,10 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
         frames = (angio_a.frame_index + 1, angio_b.frame_index + 1)
         sr_sources = read_sr_sources(file_a, file_b, frames)
     seeds = load_seeds(seeds_path)
-    segment = _segment_choice(args.segment, seeds, seeds_path)
-    if segment is False:
+    try:
+        segment = segment_choice(args.segment, seeds, seeds_path)
+    except ValueError as err:
+        print(f"coronary3d: error: {err}", file=sys.stderr)
         return EXIT_USER_ERROR
     options = ReconstructionOptions(
         matcher=args.matcher,
@@ -491,45 +494,6 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
     for path in written:
         print(path)
     return 0
-
-
-def _segment_choice(text: str | None, seeds, seeds_path: str) -> int | None | bool:
-    """--segment as an index into the seeds' segments (None: all of them; False, after
-    one line on stderr, when the name or index does not exist)."""
-    if text is None:
-        return None
-    names = [s.name for s in seeds.segments]
-    if text in names:
-        return names.index(text)
-    if text.strip().isdigit() and int(text) < len(names):
-        return int(text)
-    shown = ", ".join(repr(n) for n in names[:10]) or "none"
-    print(f"coronary3d: error: argument --segment: no segment {text!r} in {seeds_path} "
-          f"(segments: {shown}; or an index from 0 to {len(names) - 1})", file=sys.stderr)
-    return False
-
-
-def _file_bytes(path: str) -> int:
-    try:
-        return os.stat(path).st_size
-    except OSError:
-        return 0  # the loader says what is wrong with it
-
-
-def _input_files(file_a: str, file_b: str, seeds: str, geometry_json: str | None,
-                 geometry_a: str | None = None,
-                 geometry_b: str | None = None) -> list[tuple[str, str]]:
-    """(role, path) of every file a reconstruction reads, which no output may replace."""
-    found = [("file A", file_a), ("file B", file_b), ("seeds file", seeds)]
-    for role, path in (("geometry JSON", geometry_json), ("geometry JSON of file A", geometry_a),
-                       ("geometry JSON of file B", geometry_b)):
-        if path:
-            found.append((role, path))
-    for role, path in (("A", file_a), ("B", file_b)):
-        sidecar = Path(path).with_suffix(".json")
-        if sidecar != Path(path):
-            found.append((f"geometry JSON of file {role}", str(sidecar)))
-    return found
 
 
 def _mesh_formats(text: str) -> tuple[str, ...] | None:

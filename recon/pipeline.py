@@ -250,9 +250,10 @@ def _features(seeds: Seeds, segment_index: int, cl_a: Centerline2D | None = None
 def calibrate_from_seeds(
     angio_a: Angiogram, angio_b: Angiogram, seeds: Seeds, optimizer: str = "palm",
     segment: int = 0, vesselness: tuple[VesselnessMap, VesselnessMap] | None = None,
-    intensity: tuple[str, str] = ("auto", "auto"),
+    intensity: tuple[str, str] = ("auto", "auto"), calibration: str = "full",
 ) -> CalibrationResult:
-    """Calibrate view B on the clicked correspondences (the viewer's Calibrate).
+    """Calibrate view B on the clicked correspondences (the viewer's Calibrate), with
+    the same correction rule (``calibration``, as :class:`ReconstructionOptions`).
 
     With ``vesselness`` (both views' maps) the segment is traced first and its traced
     ends are used, exactly as in :func:`reconstruct_pair`'s calibration step, so both
@@ -266,7 +267,8 @@ def calibrate_from_seeds(
         cl_b = _trace(angio_b, seg.b, vesselness[1], "B",
                       angio_b.geometry.pixel_mm_at_isocenter, intensity[1])
     pa, pb = _features(seeds, segment, cl_a, cl_b)
-    return calibrate(angio_a.geometry, angio_b.geometry, pa, pb, method=optimizer)
+    return calibrate_supported(angio_a.geometry, angio_b.geometry, pa, pb, method=optimizer,
+                               candidates=CALIBRATION_CHOICES[calibration])
 
 
 def reconstruct_pair(

@@ -253,6 +253,7 @@ def test_a_new_pair_shows_no_old_marks(
             pa, pb = other / "a.dcm", other / "b.dcm"  # the same images under other names
             shutil.copy(demo_case["b"], pa)
             shutil.copy(demo_case["a"], pb)
+            app.access.add_read_root(other)  # as if the server had been started on that folder
             assert app.open_pair(str(pa), str(pb))
             assert app.state.marks == []
             b.page.wait_for_timeout(1500)
