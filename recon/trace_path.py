@@ -22,6 +22,10 @@ crossing's centre) near the pixel: inside a crossing the route goes straight.
 Solved with ``scipy.sparse.csgraph.dijkstra`` (Dijkstra 1959) from several
 start nodes (``min_only``).
 
+A loop that the route cut across at its crossing is followed round
+(:func:`loop_apices`: a ring of ridge touching the route twice; :func:`ring_circuits`:
+a tight loop's ring, whose hole shows above the band's level).
+
 Checks of a traced centerline (:func:`find_route_problem`): a stretch off the
 vessel, a hairpin (the route doubling back) or a stretch that runs over an
 earlier part of the route.
@@ -39,13 +43,14 @@ from scipy import ndimage as ndi
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import cKDTree
+from skimage.measure import find_contours
 from skimage.morphology import skeletonize
 
 from recon.trace_error import TraceError
 from recon.vesselness import RADIUS_PER_SIGMA, VesselnessMap
 
-__all__ = ["Route", "minimal_route", "loop_apices", "RouteProblem", "find_route_problem",
-           "N_HEADINGS"]
+__all__ = ["Route", "minimal_route", "loop_apices", "ring_circuits", "RouteProblem",
+           "find_route_problem", "N_HEADINGS"]
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -73,6 +78,9 @@ _MAX_MOVE_PX = 4
 _CROP_MARGIN = 1.0
 #: At a waypoint the heading may change by at most this many steps (90 deg).
 _WAYPOINT_TURN = 4
+#: Loops are looked for in the band and above these multiples of its response level
+#: (the ring of a loop about two lumens wide fills in at the band's level).
+_RING_LEVELS = (1.0, 1.5, 2.0)
 
 
 @dataclass(frozen=True)
@@ -260,7 +268,10 @@ def minimal_route(
             last_err = err
             continue
         lumen_px = radius_from_scale(vmap.scale_px[r0:r1, c0:c1])
-        return _round_loops(route, graph, band, lumen_px, local, move_px, (c0, r0), view, r_ref)
+        # A tight loop's ring may show its hole only above the band's level.
+        rings = [band & (resp >= f * tau) for f in _RING_LEVELS]
+        return _round_loops(route, graph, rings, lumen_px, local, move_px, (c0, r0), view,
+                            r_ref)
     assert last_err is not None
     raise last_err
 
@@ -378,6 +389,65 @@ def loop_apices(band: NDArray[np.bool_], path_px: FloatArray, radius_px: float,
     return sorted(found, key=lambda item: item[0])
 
 
+def ring_circuits(band: NDArray[np.bool_], path_px: FloatArray,
+                  radius_px: float) -> list[tuple[int, FloatArray]]:
+    """Tight loops that a route (M, 2) cut across, found as holes of a band (col, row).
+
+    The ring of a loop about two lumens wide lies mostly inside the tube that
+    :func:`loop_apices` leaves out, but at a response level above the band's it
+    encloses a hole (after a binary closing of one pixel). A hole counts as a loop's
+    when a disc of radius 0.6 r fits in it, it is at most (8 r)^2 px in area, and
+    the route comes within 1.5 r + 2 px of the ring's centre line (the iso-line at r
+    from the hole, scikit-image's marching squares) along at most 4 r + 4 px of
+    route (the loop's crossing; a route that already runs along the ring, or a
+    hole between the vessel, a branch and a crossing vessel, meets it along a
+    side), farther than 2.5 r + 5 px from the route's ends, and half of that
+    centre line lies in the band.
+
+    Returns (route index of the crossing, the ring's centre line (P, 2) as a closed
+    circuit from and back to its point nearest the crossing, heading the way the
+    route heads there), in route order.
+    """
+    band = ndi.binary_closing(band)  # a ring broken by one pixel still encloses its hole
+    holes = ndi.binary_fill_holes(band) & ~band
+    labels, n = ndi.label(holes)
+    if n == 0:
+        return []
+    areas = np.bincount(labels.ravel())
+    inscribed = ndi.maximum(ndi.distance_transform_edt(holes), labels, np.arange(n + 1))
+    s_route = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(path_px, axis=0),
+                                                              axis=1))])
+    step = float(np.median(np.diff(s_route))) if len(s_route) > 1 else 1.0
+    tangent = np.gradient(path_px, axis=0)
+    found: list[tuple[int, FloatArray]] = []
+    for k in range(1, n + 1):
+        if inscribed[k] < 0.6 * radius_px or areas[k] > 64.0 * radius_px**2:
+            continue  # a sliver between a vessel and a branch, or not one ring
+        d_hole = ndi.distance_transform_edt(labels != k)
+        lines = [c for c in find_contours(d_hole, radius_px)
+                 if len(c) > 8 and np.allclose(c[0], c[-1])]
+        if not lines:
+            continue
+        ring = max(lines, key=len)[:-1, ::-1]  # (P, 2) (col, row), closed
+        ring_rc = np.rint(ring[:, ::-1]).astype(int)
+        if np.mean(band[ring_rc[:, 0], ring_rc[:, 1]]) < 0.5:
+            continue  # the iso-line leaves the band: no ring of the vessel's calibre
+        d_route, j_ring = cKDTree(ring).query(path_px)
+        near = np.flatnonzero(d_route <= 1.5 * radius_px + 2.0)
+        if not len(near) or len(near) * step > 4.0 * radius_px + 4.0:
+            continue
+        i = int(near[np.argmin(d_route[near])])
+        end_px = 2.5 * radius_px + 5.0  # as loop_apices: past the crossing's blob
+        if s_route[i] < end_px or s_route[i] > s_route[-1] - end_px:
+            continue
+        j = int(j_ring[i])
+        circuit = np.roll(ring, -j, axis=0)
+        if np.dot(circuit[1] - circuit[0], tangent[i]) < 0:
+            circuit = np.roll(circuit[::-1], 1, axis=0)
+        found.append((i, np.vstack([circuit, circuit[:1]])))
+    return sorted(found, key=lambda item: item[0])
+
+
 def _contact_path(rows: IntArray, cols: IntArray, touch: NDArray[np.bool_]) -> IntArray | None:
     """Indices (into rows/cols) of the skeleton path (8-connected) between the two pixels
     touching the tube that lie farthest apart along a skeleton piece; None if the
@@ -401,26 +471,69 @@ def _contact_path(rows: IntArray, cols: IntArray, touch: NDArray[np.bool_]) -> I
     return np.asarray(chain[::-1], dtype=np.int64)
 
 
-def _round_loops(route: Route, graph: _Graph, band: NDArray[np.bool_], lumen_px: FloatArray,
-                 local: FloatArray, move_px: int, origin: tuple[int, int], view: str,
-                 radius_px: float) -> Route:
-    """The route with every loop it cut across (:func:`loop_apices`) followed round: the
-    loops' apices become waypoints that the route passes without turning back; the
-    route without them is kept if that fails, if the new route doubles back or runs
-    over itself (:func:`find_route_problem`), or if it runs back along itself (then it
-    went into a branch and back)."""
+def _round_loops(route: Route, graph: _Graph, rings: list[NDArray[np.bool_]],
+                 lumen_px: FloatArray, local: FloatArray, move_px: int,
+                 origin: tuple[int, int], view: str, radius_px: float) -> Route:
+    """The route with every loop it cut across followed round.
+
+    Loops are sought in the ``rings`` masks (the band at rising response levels), the
+    first that shows one. A loop found by :func:`loop_apices` has its apex made a
+    waypoint that the route passes without turning back; the route without it is
+    kept if that fails, if the new route doubles back or runs over itself
+    (:func:`find_route_problem`), or if it runs back along itself (then it went into
+    a branch and back). Failing that, a tight loop's ring (:func:`ring_circuits`) is
+    spliced into the route at its crossing (:func:`_spliced`).
+    """
     o = np.asarray(origin, float)
-    loops = loop_apices(band, route.path_px - o, radius_px, lumen_px)
-    if not loops:
+    for ring_band in rings:
+        loops = loop_apices(ring_band, route.path_px - o, radius_px, lumen_px)
+        if loops:
+            break
+    else:
+        for ring_band in rings:
+            circuits = ring_circuits(ring_band, route.path_px - o, radius_px)
+            if circuits:
+                return _spliced(route, circuits, o, radius_px)
         return route
-    clicks = [p for p in local]
+    at = [int(np.clip(np.searchsorted(route.click_index, index, side="right"), 1,
+                      len(local) - 1)) for index, _ in loops]  # after the click before
+    apices = [apex for _, apex in loops]
+    looped = _through_apices(graph, local, at, apices, move_px, origin, view, radius_px)
+    return route if looped is None else looped
+
+
+def _spliced(route: Route, circuits: list[tuple[int, FloatArray]], origin: FloatArray,
+             radius_px: float) -> Route:
+    """The route with each ring circuit (:func:`ring_circuits`, crop pixels) spliced in
+    at its crossing; the route as it was if the result doubles back or runs over
+    itself (:func:`find_route_problem`)."""
+    pieces, index = [], np.asarray(route.click_index).copy()
+    start = 0
+    for i, circuit in circuits:
+        pieces += [route.path_px[start : i + 1], circuit + origin]
+        index[index > i] += len(circuit)
+        start = i + 1
+    pieces.append(route.path_px[start:])
+    path = np.concatenate(pieces)
+    if find_route_problem(path, np.full(len(path), radius_px), np.ones(len(path), bool)):
+        return route
+    return Route(path_px=path, click_index=index, move_px=route.move_px)
+
+
+def _through_apices(graph: _Graph, local: FloatArray, at: list[int], apices: list[FloatArray],
+                    move_px: int, origin: tuple[int, int], view: str,
+                    radius_px: float) -> Route | None:
+    """The route through the clicks ``local`` (K, 2) with each apex (2,) inserted before
+    click ``at[i]`` (1 <= at <= K - 1) as a waypoint it may not fold back at; None if
+    there is none, if it doubles back or runs over itself (:func:`find_route_problem`),
+    or if it runs back along itself (into a branch and back)."""
+    clicks = list(local)
     is_click = [True] * len(local)
-    for index, apex in reversed(loops):  # after the click before the crossing
-        seg = int(np.searchsorted(route.click_index, index, side="right") - 1)
-        seg = int(np.clip(seg, 0, len(local) - 2))
-        insert = seg + 1 + sum(not c for c in is_click[: seg + 1])
-        clicks.insert(insert, apex)
-        is_click.insert(insert, False)
+    # From the last insertion point back, so the earlier positions stay valid; apices
+    # before the same click keep their order.
+    for pos, apex in reversed(sorted(zip(at, apices, strict=True), key=lambda a: a[0])):
+        clicks.insert(pos, apex)
+        is_click.insert(pos, False)
     pts = np.array(clicks)
     rc = [(int(p[1]), int(p[0])) for p in np.rint(pts)]
     keep = np.asarray(is_click, dtype=bool)
@@ -428,12 +541,12 @@ def _round_loops(route: Route, graph: _Graph, band: NDArray[np.bool_], lumen_px:
         looped = _route_on(graph, pts, rc, move_px, origin, view, radius_px,
                            no_fold=frozenset(np.nonzero(~keep)[0].tolist()))
     except TraceError:
-        return route
+        return None
     path = looped.path_px
     if find_route_problem(path, np.full(len(path), radius_px), np.ones(len(path), bool)):
-        return route
+        return None
     if _retraces(path, radius_px):
-        return route  # a detour into a branch and back, not a loop
+        return None
     return Route(path_px=looped.path_px, click_index=looped.click_index[keep],
                  move_px=looped.move_px)
 
