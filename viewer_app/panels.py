@@ -259,11 +259,12 @@ class Panels:
         r.markdown.content = results_markdown(rec)
         s = np.asarray(rec.profile.s_mm, dtype=float)
         m = rec.measurements
+        lo, hi = slider_range_mm(s)
         with self.refreshing.during():
             for h, value in ((r.lesion_start, m.lesion_start_s_mm),
                              (r.lesion_end, m.lesion_end_s_mm)):
-                h.min, h.max, h.step = float(s[0]), float(s[-1]), 0.1
-                h.value = float(np.round(value, 1))
+                h.min, h.max, h.step = lo, hi, 0.1
+                h.value = float(np.clip(np.round(value, 1), lo, hi))
                 h.visible = True
         self.show_lesion(rec, None)
         r.plot.visible = True
@@ -272,6 +273,14 @@ class Panels:
         """The clinical table and the chart for the automatic or hand-set lesion ends."""
         self.results.clinical.content = clinical_markdown(rec, lesion)
         self.results.plot.image = profile_plot(rec, width=420, height=300, lesion=lesion)
+
+
+def slider_range_mm(s_mm: np.ndarray) -> tuple[float, float]:
+    """A lesion slider's (min, max) in mm on its 0.1 mm grid, inside the profile's arc
+    length (s_mm: (M,) increasing): the page prints them as they are."""
+    lo = float(np.ceil(np.round(float(s_mm[0]) * 10.0, 6)) / 10.0)
+    hi = float(np.floor(np.round(float(s_mm[-1]) * 10.0, 6)) / 10.0)
+    return round(lo, 1), round(max(hi, lo + 0.1), 1)
 
 
 def build_panels(gui: viser.GuiApi, app: ViewerApp) -> Panels:

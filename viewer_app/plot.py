@@ -41,6 +41,12 @@ def profile_plot(rec: Reconstruction, width: int = 640, height: int = 360,
         return np.stack([xs, ys], axis=-1).round().astype(np.int32)
 
     font = cv2.FONT_HERSHEY_SIMPLEX
+    for (lo, hi), colour, label in _flagged_stretches(rec):  # behind everything else
+        a, b = px(np.array([lo, hi]), np.zeros(2))
+        cv2.rectangle(img, (int(a[0]), top), (max(int(b[0]), int(a[0]) + 1), height - bottom),
+                      colour, -1)
+        cv2.putText(img, label, (int(a[0]) + 2, top + 12), font, 0.35, (90, 90, 90), 1,
+                    cv2.LINE_AA)
     lesion = (meas.get("lesion_start_s_mm"), meas.get("lesion_end_s_mm"))
     if all(v is not None for v in lesion):
         a, b = px(np.array(lesion, float), np.zeros(2))
@@ -76,3 +82,26 @@ def profile_plot(rec: Reconstruction, width: int = 640, height: int = 360,
     cv2.putText(img, "diameter (mm) vs arc length (mm); grey: reference; red band: lesion",
                 (left, 16), font, 0.4, (40, 40, 40), 1, cv2.LINE_AA)
     return img
+
+
+BRANCH_BAND = (222, 222, 222)  # a side branch's ostium widens the silhouette
+OVERLAP_BAND = (255, 243, 190)  # one view overlapped: the other view's width is used
+
+
+def _flagged_stretches(rec: Reconstruction) -> list[tuple[tuple[float, float],
+                                                          tuple[int, int, int], str]]:
+    """The stretches the chart shades, ((start, end) mm, colour, label): side-branch ostia
+    (:func:`viewer_app.results.branch_stretches`) and overlapped stretches of either view
+    (``Centerline3D.overlap_stretches_mm``). The measured curve is drawn over them."""
+    from viewer_app.results import branch_stretches
+
+    out = []
+    c = getattr(rec, "centerline_3d", None)
+    if c is not None:
+        for view in ("a", "b"):
+            out += [((lo, hi), OVERLAP_BAND, f"{view.upper()} overlapped")
+                    for lo, hi in c.overlap_stretches_mm(view)]
+    if c is not None and getattr(rec, "seeds", None) is not None:
+        out += [((b["start_mm"], b["end_mm"]), BRANCH_BAND, "branch")
+                for b in branch_stretches(rec)]
+    return out

@@ -25,6 +25,7 @@ __all__ = [
     "NOT_CALIBRATED_TEXT",
     "NO_RECONSTRUCTION_TEXT",
     "angle_text",
+    "branch_stretches",
     "calibration_markdown",
     "clinical_markdown",
     "lesion_measurements",
@@ -187,6 +188,49 @@ def lesion_measurements(profile: object, start_mm: float, end_mm: float) -> dict
     }
 
 
+def branch_stretches(rec: Reconstruction) -> list[dict[str, float | str]]:
+    """Stretches of the segment where a side branch leaves it, from the clicked features.
+
+    A feature (clicked in both views) is triangulated with the reconstruction's
+    geometry; when it lies on the segment (within the larger of 1.5 mm and twice the
+    local radius of the 3D centerline), at least one reference diameter D from either
+    end, it is a branch point at arc length s. There the side branch's ostium widens the
+    vessel's silhouette in both views, so the measured diameter from s - D to s + 1.5 D
+    (the branch leaves distally) is the main vessel plus part of the branch. Returns
+    dicts ``name``, ``s_mm``, ``start_mm``, ``end_mm``, proximal first.
+    """
+    from recon.geometry import triangulate
+
+    features = getattr(rec.seeds, "features", ())
+    if not features:
+        return []
+    c = rec.centerline_3d
+    s = np.asarray(c.s_mm, dtype=float)
+    ref = np.asarray(rec.profile.reference_diameter_mm, dtype=float)
+    X = triangulate(np.array([f.a_px for f in features], float),
+                    np.array([f.b_px for f in features], float), rec.view_a, rec.view_b)
+    dist = np.linalg.norm(np.asarray(c.X_world)[None, :, :] - X[:, None, :], axis=-1)
+    nearest = np.argmin(dist, axis=1)
+    out = []
+    for f, i, d_mm in zip(features, nearest, dist[np.arange(len(features)), nearest],
+                          strict=True):
+        d_ref = float(ref[i])
+        on_vessel = d_mm <= max(1.5, 2.0 * float(c.radius_mm[i]))
+        if on_vessel and s[0] + d_ref <= s[i] <= s[-1] - d_ref:
+            out.append({"name": f.name or "feature", "s_mm": float(s[i]),
+                        "start_mm": float(max(s[i] - d_ref, s[0])),
+                        "end_mm": float(min(s[i] + 1.5 * d_ref, s[-1]))})
+    return sorted(out, key=lambda b: b["s_mm"])
+
+
+def _with_ci(text: str, key: str, ci: dict, digits: int) -> str:
+    """``text`` followed by the 95 % interval of ``key`` when there is one."""
+    if key not in ci:
+        return text
+    lo, hi = ci[key]
+    return f"{text} ({lo:.{digits}f}–{hi:.{digits}f})"
+
+
 def clinical_markdown(rec: Reconstruction, lesion: dict[str, float] | None = None) -> str:
     """The results a clinician reads, with labels and units; the foreshortening of the
     segment in both views and the best next view when the reconstruction has them.
@@ -208,18 +252,32 @@ def clinical_markdown(rec: Reconstruction, lesion: dict[str, float] | None = Non
         source = "automatic lesion detection" if m.has_lesion else "no lesion found"
     else:
         v, source = lesion, "lesion ends set by hand"
-    rows = [f"**3D QCA** ({source})", "", "| | |", "| --- | --- |",
-            f"| Minimal lumen diameter | **{v['mld_mm']:.2f} mm** |",
-            f"| % diameter stenosis | **{v['diameter_stenosis_pct']:.0f} %** |",
-            f"| % area stenosis | {v['area_stenosis_pct']:.0f} % |",
-            f"| Minimal lumen area | {v['mla_mm2']:.2f} mm² |",
-            f"| Reference diameter at the MLD | {v['reference_diameter_mm']:.2f} mm |",
+    # The 95 % intervals are those of the automatic analysis (report.json
+    # measurements_ci95); lesion ends set by hand have none, and the segment length
+    # does not depend on them.
+    ci_all = rec.intervals.ci95 if getattr(rec, "intervals", None) is not None else {}
+    ci = ci_all if lesion is None else {}
+    mld = _with_ci(f"**{v['mld_mm']:.2f} mm**", "mld_mm", ci, 2)
+    ds = _with_ci(f"**{v['diameter_stenosis_pct']:.0f} %**", "diameter_stenosis_pct", ci, 0)
+    rows = [f"**3D QCA** ({source}" + ("; 95 % intervals in brackets" if ci else "") + ")",
+            "", "| | |", "| --- | --- |",
+            f"| Minimal lumen diameter | {mld} |",
+            f"| % diameter stenosis | {ds} |",
+            "| % area stenosis | "
+            + _with_ci(f"{v['area_stenosis_pct']:.0f} %", "area_stenosis_pct", ci, 0) + " |",
+            "| Minimal lumen area | "
+            + _with_ci(f"{v['mla_mm2']:.2f} mm²", "mla_mm2", ci, 2) + " |",
+            "| Reference diameter at the MLD | "
+            + _with_ci(f"{v['reference_diameter_mm']:.2f} mm", "reference_diameter_mm", ci, 2)
+            + " |",
             f"| Proximal / distal reference | {v['proximal_reference_mm']:.2f} / "
             f"{v['distal_reference_mm']:.2f} mm |",
-            f"| Lesion length | {v['lesion_length_mm']:.1f} mm "
-            f"({v['lesion_start_s_mm']:.1f}–{v['lesion_end_s_mm']:.1f} mm) |",
+            "| Lesion length | "
+            + _with_ci(f"{v['lesion_length_mm']:.1f} mm", "lesion_length_mm", ci, 1)
+            + f", from {v['lesion_start_s_mm']:.1f} to {v['lesion_end_s_mm']:.1f} mm |",
             f"| MLD position | {v['mld_s_mm']:.1f} mm from the proximal end |",
-            f"| Segment length | {m.segment_length_mm:.1f} mm |"]
+            "| Segment length | "
+            + _with_ci(f"{m.segment_length_mm:.1f} mm", "segment_length_mm", ci_all, 1) + " |"]
     best = getattr(rec, "optimal_view", None)
     if best is not None:
         fs = best.current_foreshortening_pct
@@ -227,4 +285,24 @@ def clinical_markdown(rec: Reconstruction, lesion: dict[str, float] | None = Non
         rows.append(f"| Best next view | **{angle_text(*best.angles_deg)}** "
                     f"(foreshortening {best.foreshortening_pct:.1f} %, overlap "
                     f"{best.overlap_pct:.0f} %) |")
+    rows += _caveats(rec, v)
     return "\n".join(rows)
+
+
+def _caveats(rec: Reconstruction, v: dict[str, float]) -> list[str]:
+    """Lines under the table: the stretches whose diameter is not the lumen's alone."""
+    lines = []
+    for b in branch_stretches(rec):
+        inside = b["start_mm"] <= v["mld_s_mm"] <= b["end_mm"] or (
+            v["lesion_start_s_mm"] <= b["end_mm"] and b["start_mm"] <= v["lesion_end_s_mm"])
+        lines.append(f"- Side branch at {b['s_mm']:.1f} mm ({b['name']}): the diameter from "
+                     f"{b['start_mm']:.1f} to {b['end_mm']:.1f} mm includes its ostium "
+                     "(grey band in the chart)"
+                     + ("; **the lesion overlaps it: check the lesion ends**." if inside
+                        else "."))
+    for view, other in (("a", "B"), ("b", "A")):
+        for lo, hi in rec.centerline_3d.overlap_stretches_mm(view):
+            lines.append(f"- {lo:.1f}–{hi:.1f} mm: another vessel overlaps view "
+                         f"{view.upper()}; the diameter there uses view {other}'s width "
+                         "(yellow band in the chart).")
+    return [""] + lines if lines else []

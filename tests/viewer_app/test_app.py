@@ -16,6 +16,8 @@ import trimesh
 from recon.io import load_seeds
 from recon.seeds import seeds_from_dict
 from viewer_app import ViewerApp, run_viewer
+from viewer_app.plot import BRANCH_BAND
+from viewer_app.results import branch_stretches
 
 
 def _line_distance_px(seg: np.ndarray, point_px: np.ndarray) -> float:
@@ -117,8 +119,32 @@ def test_reconstruct_then_export(app: ViewerApp) -> None:
     assert app.panels.results.plot.visible
     m = rec.measurements
     clinical = app.panels.results.clinical.content
-    assert f"| Minimal lumen diameter | **{m.mld_mm:.2f} mm** |" in clinical
-    assert f"| % diameter stenosis | **{m.diameter_stenosis_pct:.0f} %** |" in clinical
+    ci = rec.intervals.ci95  # report.json measurements_ci95, beside each figure (issue 14)
+    assert (f"| Minimal lumen diameter | **{m.mld_mm:.2f} mm** ({ci['mld_mm'][0]:.2f}–"
+            f"{ci['mld_mm'][1]:.2f}) |") in clinical
+    lo, hi = ci["diameter_stenosis_pct"]
+    assert (f"| % diameter stenosis | **{m.diameter_stenosis_pct:.0f} %** ({lo:.0f}–{hi:.0f})"
+            " |") in clinical
+    lo, hi = ci["lesion_length_mm"]
+    assert f"| Lesion length | {m.lesion_length_mm:.1f} mm ({lo:.1f}–{hi:.1f}), from " in clinical
+    # The lesion sliders' ends are on their 0.1 mm grid (the page printed "91.722401").
+    s = rec.profile.s_mm
+    for h in (app.panels.results.lesion_start, app.panels.results.lesion_end):
+        assert f"{h.max:g}" == f"{h.max:.1f}".rstrip("0").rstrip(".")
+        assert f"{h.min:g}" == f"{h.min:.1f}".rstrip("0").rstrip(".")
+        assert s[0] <= h.min < s[0] + 0.1 and s[-1] - 0.1 < h.max <= s[-1]
+    # The demo's side branch (feature "bifurcation 1", at 21.5 mm in truth.json) widens
+    # the measured diameter by ~0.5 mm: the spike is in the profile, not the chart, and
+    # the page says where it is rather than hiding it.
+    excess = rec.profile.diameter_mm - rec.profile.reference_diameter_mm
+    near = (s > 10.0) & (s < 40.0)
+    s_spike = float(s[near][np.argmax(excess[near])])
+    assert float(np.max(excess[near])) > 0.3
+    (branch,) = branch_stretches(rec)
+    assert abs(branch["s_mm"] - 21.5) < 1.0 and branch["start_mm"] < s_spike < branch["end_mm"]
+    assert f"Side branch at {branch['s_mm']:.1f} mm (bifurcation 1)" in clinical
+    chart = app.panels.results.plot.image
+    assert np.count_nonzero(np.all(chart == BRANCH_BAND, axis=-1)) > 500
     assert "Table 3" not in clinical and "ms" not in clinical  # engineering folded away
     # Moving the lesion ends: the measurements, chart and marks follow.
     start, end = m.lesion_start_s_mm - 3.0, m.lesion_end_s_mm + 3.0
