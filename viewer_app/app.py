@@ -42,6 +42,7 @@ from viewer_app import scene
 from viewer_app.access import PATCHED_VISER_VERSION, FileAccess, ServerGuard, guarded_serve
 from viewer_app.camera import PageCameras
 from viewer_app.panels import Panels, build_panels
+from viewer_app.results import close_views_warning
 from viewer_app.scene import LAYOUTS, ModelNodes, View
 from viewer_app.state import (
     Autosave,
@@ -123,6 +124,7 @@ class ViewerApp:
         self.layout = LAYOUTS[0]  # what the page shows: one of scene.LAYOUTS
         self.model: ModelNodes | None = None
         self.lesion: dict[str, float] | None = None  # lesion ends set by hand (mm), if any
+        self.pair_warning: str | None = None  # views too similar to fix depth
 
         angio_a = load_angiogram(path_a, frame=frame_a, overrides=overrides_a)
         angio_b = load_angiogram(path_b, frame=frame_b, overrides=overrides_b)
@@ -197,6 +199,8 @@ class ViewerApp:
         """A page that connects learns what happened to the autosave at start."""
         for notice in self.autosave_notices:
             self.notify("Autosave kept aside", notice, "warning", client)
+        if self.pair_warning is not None:
+            self.notify("Views too similar", self.pair_warning, "warning", client)
 
     def notify(
         self, title: str, body: str, level: str = "info", client: object | None = None
@@ -256,6 +260,9 @@ class ViewerApp:
             for v in self.views.values():
                 scene.add_view_nodes(self.server.scene, v, self._make_click_callback(v.key))
             self.panels.show_pair(self.views)
+            self.pair_warning = close_views_warning(angio_a.geometry, angio_b.geometry)
+            if self.pair_warning is not None:  # at once, before any computation
+                self.notify("Views too similar", self.pair_warning, "warning")
             self.panels.show_geometry(
                 {k: v.angio.geometry.to_dict() for k, v in self.views.items()},
                 {k: v.display_name for k, v in self.views.items()})

@@ -30,6 +30,7 @@ from viewer_app.results import (
     NOT_CALIBRATED_TEXT,
     calibration_markdown,
     clinical_markdown,
+    close_views_warning,
     info_markdown,
     marks_markdown,
     results_markdown,
@@ -100,6 +101,7 @@ class CasePanel:
 class MarksPanel:
     """Click mode, segments, the selected mark, undo / clear and the marks summary."""
 
+    warning: viser.GuiMarkdownHandle  # about the pair (views too similar), hidden if none
     guide: viser.GuiMarkdownHandle  # what the next click in A and in B places
     mode: viser.GuiDropdownHandle
     segment: viser.GuiDropdownHandle
@@ -214,8 +216,14 @@ class Panels:
         self.geometry.note.content = text
 
     def show_info(self, views: Mapping[str, View]) -> None:
+        """The case table, and the warning at the top of the Marks folder for views too
+        similar to fix depth (shown before any computation)."""
         a, b = views["a"], views["b"]
         self.case.info.content = info_markdown(a.angio, b.angio, a.display_name, b.display_name)
+        warning = close_views_warning(a.angio.geometry, b.angio.geometry)
+        self.marks.warning.content = "" if warning is None else f"⚠ **Views too similar**: " \
+            f"{warning}"
+        self.marks.warning.visible = warning is not None
 
     def show_marks(self, st: MarkState, last_click_ms: float, autosave_path: str | Path) -> None:
         """The segment and selection lists, and the marks summary."""
@@ -387,6 +395,7 @@ def _marks_panel(gui: viser.GuiApi, app: ViewerApp, refreshing: Refreshing) -> M
     # Python fires these callbacks later on viser's event loop (client None), when
     # the value read may already be stale: only a user's change may act.
     with gui.add_folder("Marks"):
+        warning = gui.add_markdown("", visible=False)
         guide = gui.add_markdown("")
         mode = gui.add_dropdown("Mode", [MODE_LABELS[m] for m in MODES],
                                 initial_value=MODE_LABELS["guided"])
@@ -433,8 +442,9 @@ def _marks_panel(gui: viser.GuiApi, app: ViewerApp, refreshing: Refreshing) -> M
             app.clear()
 
         summary = gui.add_markdown("")
-    return MarksPanel(guide=guide, mode=mode, segment=segment, new_segment=new_segment,
-                      select=select, undo=undo, clear=clear, summary=summary)
+    return MarksPanel(warning=warning, guide=guide, mode=mode, segment=segment,
+                      new_segment=new_segment, select=select, undo=undo, clear=clear,
+                      summary=summary)
 
 
 GEOMETRY_WORDS = {"sid_mm": "SID (mm)", "sod_mm": "SOD (mm)",

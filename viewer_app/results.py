@@ -17,6 +17,7 @@ from recon.geometry import MIN_VIEW_SEPARATION_DEG, view_separation_deg
 
 if TYPE_CHECKING:
     from recon.calibration import CalibrationResult
+    from recon.geometry import ViewGeometry
     from recon.pipeline import Reconstruction
     from recon.types import Angiogram
     from viewer_app.state import MarkState
@@ -28,6 +29,7 @@ __all__ = [
     "branch_stretches",
     "calibration_markdown",
     "clinical_markdown",
+    "close_views_warning",
     "lesion_measurements",
     "fmt",
     "info_markdown",
@@ -75,11 +77,22 @@ def info_markdown(angio_a: Angiogram, angio_b: Angiogram, name_a: str, name_b: s
                 f"{angio_b.frame_index + 1}/{angio_b.n_frames} |")
     separation = view_separation_deg(ga, gb)
     rows.append(f"\nViews {separation:.0f}° apart.")
-    if separation < MIN_VIEW_SEPARATION_DEG:
-        rows.append(f"⚠ **Views too similar**: at least {MIN_VIEW_SEPARATION_DEG:.0f}° are "
-                    "needed to fix depth; Reconstruct will refuse this pair. Open two views "
-                    "further apart.")
+    warning = close_views_warning(ga, gb)
+    if warning is not None:
+        rows.append(f"⚠ **Views too similar**: {warning}")
     return "\n".join(rows)
+
+
+def close_views_warning(view_a: ViewGeometry, view_b: ViewGeometry) -> str | None:
+    """The warning for two views whose central rays are less than
+    :data:`recon.geometry.MIN_VIEW_SEPARATION_DEG` apart (the separation the
+    reconstruction refuses, :func:`recon.geometry.view_separation_deg`); None otherwise."""
+    separation = view_separation_deg(view_a, view_b)
+    if separation >= MIN_VIEW_SEPARATION_DEG:
+        return None
+    return (f"the views are {separation:.0f}° apart and at least "
+            f"{MIN_VIEW_SEPARATION_DEG:.0f}° are needed to fix depth; Reconstruct will "
+            "refuse this pair. Open two views further apart.")
 
 
 def marks_markdown(state: MarkState, last_click_ms: float, autosave_path: str | Path) -> str:

@@ -197,6 +197,31 @@ def test_bad_files_become_notifications(app: ViewerApp, tmp_path: Path) -> None:
     assert app.calibrate is not None and app.click("a", 100.0, 100.0) is not None  # still alive
 
 
+def test_views_too_similar_are_named_as_soon_as_the_pair_is_open(app: ViewerApp) -> None:
+    """Issue 16: a pair less than 25 degrees apart is named in the page when it opens,
+    before any Calibrate or Reconstruct (the pipeline would refuse it)."""
+    from recon.geometry import view_separation_deg
+    from recon.io.overrides import GeometryOverrides
+
+    assert not app.panels.marks.warning.visible  # the demo's views are 60 degrees apart
+    ga = app.views["a"].angio.geometry
+    near = GeometryOverrides(alpha_deg=ga.alpha_deg + 10.0, beta_deg=ga.beta_deg)
+    path_a, path_b = app.views["a"].angio.path, app.views["b"].angio.path
+    n = len(app.notifications)
+    assert app.open_pair(path_a, path_b, overrides_b=near)
+    separation = view_separation_deg(ga, app.views["b"].angio.geometry)
+    assert 5.0 < separation < 25.0
+    warned = [(level, body) for level, title, body in app.notifications[n:]
+              if title == "Views too similar"]
+    assert warned and warned[0][0] == "warning" and f"{separation:.0f}°" in warned[0][1]
+    assert app.panels.marks.warning.visible
+    assert "Views too similar" in app.panels.marks.warning.content
+    assert "Views too similar" in app.panels.case.info.content
+    assert app.reconstruction is None and app.calibration is None
+    assert app.open_pair(path_a, path_b)  # a pair far enough apart: the warning goes
+    assert not app.panels.marks.warning.visible
+
+
 def test_marks_are_autosaved_and_restored(demo_case: dict[str, Path], tmp_path: Path) -> None:
     autosave = tmp_path / "out" / "seeds.autosave.json"
     kwargs = dict(host="127.0.0.1", port=0, autosave_path=autosave, out_dir=tmp_path)

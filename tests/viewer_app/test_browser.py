@@ -10,6 +10,7 @@ Screenshots go to test-artifacts/viewer/. Needs /usr/bin/chromium and the
 from __future__ import annotations
 
 import json
+import re
 import shutil
 import time
 from pathlib import Path
@@ -262,6 +263,15 @@ def test_a_new_pair_shows_no_old_marks(
             # live page keeps stale names in its lookup table, so reload to ask).
             b.reload()
             assert b.page.evaluate(MARK_LABELS_JS) == []
+            # Views too similar: the page says so as soon as the pair is open.
+            from recon.io.overrides import GeometryOverrides
+
+            ga = app.views["a"].angio.geometry
+            assert app.open_pair(str(pa), str(pb), overrides_b=GeometryOverrides(
+                alpha_deg=ga.alpha_deg + 10.0, beta_deg=ga.beta_deg))
+            warning = b.page.get_by_text("Views too similar").first
+            warning.wait_for(state="visible", timeout=10_000)
+            b.shot("new_pair_views_too_similar.png")
         finally:
             b.close()
             app.stop()
@@ -361,6 +371,9 @@ def test_guided_session_from_an_empty_page_to_a_mesh(
             b.shot("guided_9_after_reload.png")
             b.page.get_by_text("Lesion end (mm)").scroll_into_view_if_needed()
             b.shot("guided_10_results_panel.png")
+            # The sliders' end labels as the page prints them (they read "91.722401").
+            ends = b.page.locator(".mantine-Slider-markLabel").all_inner_texts()
+            assert ends and all(re.fullmatch(r"\d+(\.\d)?", e.strip()) for e in ends), ends
 
             with b.page.expect_download(timeout=30_000) as info:
                 b.page.get_by_role("button", name="Download report.json").click()
