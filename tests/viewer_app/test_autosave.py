@@ -92,3 +92,38 @@ def test_coronary3d_view_starts_with_a_deeply_nested_autosave(
         _, stderr = proc.communicate(timeout=30)
     assert "Traceback" not in stderr
     assert [p.name for p in path.parent.glob("*.damaged-*.json")]
+
+
+def test_a_tree_survives_load_save_autosave_and_a_restart(
+    demo_case: dict[str, Path], tmp_path: Path
+) -> None:
+    """Issue 15: the viewer saved a branch's marks without its parent and bifurcation."""
+    doc = json.loads(demo_case["seeds"].read_text())
+    bif = doc["features"][0]
+    doc["version"] = 2
+    doc["segments"].append({"name": "D1", "parent": doc["segments"][0]["name"],
+                            "bifurcation": bif["name"], "a": [bif["a"], [250.0, 330.0]],
+                            "b": [bif["b"], [300.0, 330.0]]})
+    seeds_path = tmp_path / "tree.json"
+    seeds_path.write_text(json.dumps(doc))
+    autosave = tmp_path / "auto.json"
+    links = [(s["name"], s.get("parent"), s.get("bifurcation")) for s in doc["segments"]]
+    app = ViewerApp(str(demo_case["a"]), str(demo_case["b"]), str(seeds_path),
+                    host="127.0.0.1", port=0, autosave_path=autosave, out_dir=tmp_path)
+    try:
+        saved = app.save_seeds(tmp_path / "saved.json")
+        assert [(s["name"], s.get("parent"), s.get("bifurcation"))
+                for s in json.loads(saved.read_text())["segments"]] == links
+        app.set_mode("feature")
+        app.click("a", 150.0, 160.0)  # a change: autosaved
+        assert [(s["name"], s.get("parent"), s.get("bifurcation"))
+                for s in json.loads(autosave.read_text())["segments"]] == links
+    finally:
+        app.stop()
+    app = ViewerApp(str(demo_case["a"]), str(demo_case["b"]), None, host="127.0.0.1",
+                    port=0, autosave_path=autosave)
+    try:
+        assert app.restored_autosave
+        assert [(s.name, s.parent, s.bifurcation) for s in app.seeds().segments] == links
+    finally:
+        app.stop()
