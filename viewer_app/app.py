@@ -41,6 +41,7 @@ from recon.types import Angiogram
 from viewer_app import scene
 from viewer_app.access import PATCHED_VISER_VERSION, FileAccess, ServerGuard, guarded_serve
 from viewer_app.camera import PageCameras
+from viewer_app.catheter import CatheterTool
 from viewer_app.panels import Panels, build_panels
 from viewer_app.results import close_views_warning
 from viewer_app.scene import LAYOUTS, ModelNodes, View
@@ -125,6 +126,7 @@ class ViewerApp:
         self.model: ModelNodes | None = None
         self.lesion: dict[str, float] | None = None  # lesion ends set by hand (mm), if any
         self.pair_warning: str | None = None  # views too similar to fix depth
+        self.catheter = CatheterTool(self)  # the Geometry folder's catheter calibration
 
         angio_a = load_angiogram(path_a, frame=frame_a, overrides=overrides_a)
         angio_b = load_angiogram(path_b, frame=frame_b, overrides=overrides_b)
@@ -423,6 +425,8 @@ class ViewerApp:
         outside the image). :attr:`last_click_ms` is the server time from the
         call to the redrawn marks and epipolar line.
         """
+        if self.catheter.active:  # two clicks across the catheter, not marks
+            return self.catheter.click(view, col, row, client)
         t0 = time.perf_counter()
         with self._lock:
             try:
@@ -662,10 +666,6 @@ class ViewerApp:
             scene.draw_lesion_marks(self.server.scene, self.views, rec, self.model, marks,
                                     lesion["mld_mm"])
             return lesion
-
-    def view_all(self) -> None:
-        """Camera straight on both images and the model."""
-        self.set_layout("Angiograms + 3D" if self.model is not None else "Angiograms")
 
     # ================================================================ export
     def export(self, kind: str) -> bytes:

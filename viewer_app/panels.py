@@ -120,6 +120,10 @@ class GeometryPanel:
     note: viser.GuiMarkdownHandle
     fields: dict[str, dict[str, viser.GuiTextHandle]]  # view -> key -> text field
     apply: viser.GuiButtonHandle
+    catheter_view: viser.GuiDropdownHandle  # catheter calibration: the view, "A" or "B"
+    french: viser.GuiTextHandle  # the catheter's French size
+    catheter: viser.GuiButtonHandle  # the next two clicks in that view: its edges
+    catheter_note: viser.GuiMarkdownHandle
 
     def entries(self) -> dict[str, dict[str, str]]:
         return {v: {k: str(h.value) for k, h in f.items()} for v, f in self.fields.items()}
@@ -187,7 +191,9 @@ class Panels:
                 hi = hi if hi > lo else lo + 1.0
                 lvl, wid = c.level, c.width
                 lvl.min, lvl.max, lvl.step = lo, hi, (hi - lo) / 200
-                wid.min, wid.max, wid.step = (hi - lo) / 100, (hi - lo) * 2, (hi - lo) / 200
+                # the page prints a slider's ends: no raw float (it showed "32.99")
+                wid.min = float(f"{(hi - lo) / 100:.2g}")
+                wid.max, wid.step = (hi - lo) * 2, (hi - lo) / 200
                 lvl.value, wid.value = v.level, v.width
                 fr = c.frame
                 if v.angio.n_frames > 1:
@@ -457,7 +463,20 @@ def _geometry_panel(gui: viser.GuiApi, app: ViewerApp) -> GeometryPanel:
         fields = {view: {key: gui.add_text(f"{view.upper()} {word}", "")
                          for key, word in GEOMETRY_WORDS.items()} for view in VIEW_KEYS}
         apply = gui.add_button("Open with this geometry", icon=viser.Icon.CHECK)
-    panel = GeometryPanel(note=note, fields=fields, apply=apply)
+        gui.add_markdown("**Catheter calibration** (as in 2D QCA): the guiding catheter's "
+                         "French size (1 F = 1/3 mm) sets the pixel spacing at its depth.")
+        catheter_view = gui.add_dropdown("Catheter in", ["A", "B"], initial_value="A")
+        french = gui.add_text("Catheter size (F)", "6")
+        catheter = gui.add_button("Measure catheter (click its 2 edges)",
+                                  icon=viser.Icon.RULER_MEASURE)
+        catheter_note = gui.add_markdown("")
+    panel = GeometryPanel(note=note, fields=fields, apply=apply, catheter_view=catheter_view,
+                          french=french, catheter=catheter, catheter_note=catheter_note)
+
+    @catheter.on_click
+    def _(event: viser.GuiEvent) -> None:
+        app.catheter.start(str(catheter_view.value).lower(), str(french.value),
+                           client=event.client)
 
     @apply.on_click
     def _(event: viser.GuiEvent) -> None:

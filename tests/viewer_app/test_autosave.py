@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import os
 import signal
 import subprocess
 import sys
@@ -71,26 +70,17 @@ def test_a_damaged_autosave_does_not_stop_the_viewer_and_is_announced(
 
 
 def test_coronary3d_view_starts_with_a_deeply_nested_autosave(
-    demo_case: dict[str, Path], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+    demo_case: dict[str, Path], tmp_path: Path, monkeypatch: pytest.MonkeyPatch, start_view
 ) -> None:
     from viewer_app.state import default_autosave_path
 
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
-    env = {k: v for k, v in os.environ.items() if k != "CORONARY3D_DEBUG"}
     path = default_autosave_path(demo_case["a"], demo_case["b"])
     path.parent.mkdir(parents=True)
     path.write_text('{"viewer": ' + "[" * 100000 + "]" * 100000 + "}")
-    proc = subprocess.Popen([sys.executable, "-m", "recon.cli", "view", "--port", "0"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
-                            cwd=tmp_path)
-    try:
-        assert proc.stdout is not None
-        line = proc.stdout.readline()
-        assert "coronary3d viewer: http://127.0.0.1:" in line, proc.stderr.read()
-    finally:
-        proc.send_signal(signal.SIGTERM)
-        _, stderr = proc.communicate(timeout=30)
-    assert "Traceback" not in stderr
+    view = start_view(cache_dir=tmp_path / "cache")
+    assert view.url is not None, (view.line, view.stop())
+    assert "Traceback" not in view.stop()
     assert [p.name for p in path.parent.glob("*.damaged-*.json")]
 
 

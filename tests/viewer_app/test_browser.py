@@ -150,6 +150,12 @@ class Browser:
         self.page.get_by_label(label, exact=True).click()
         self.page.get_by_role("option", name=option, exact=True).click()
 
+    def text_field(self, label: str) -> object:
+        """The text input labelled ``label`` (viser's label is not linked to its input)."""
+        page = self.page
+        row = page.locator("div").filter(has=page.get_by_text(label, exact=True))
+        return row.filter(has=page.locator("input")).last.locator("input").first
+
     def dropdown_value(self, label: str) -> str:
         return self.page.get_by_label(label, exact=True).input_value()
 
@@ -371,7 +377,8 @@ def test_guided_session_from_an_empty_page_to_a_mesh(
             b.shot("guided_9_after_reload.png")
             b.page.get_by_text("Lesion end (mm)").scroll_into_view_if_needed()
             b.shot("guided_10_results_panel.png")
-            # The sliders' end labels as the page prints them (they read "91.722401").
+            # The sliders' end labels as the page prints them (the lesion sliders' read
+            # "91.722401", the window width's "32.99").
             ends = b.page.locator(".mantine-Slider-markLabel").all_inner_texts()
             assert ends and all(re.fullmatch(r"\d+(\.\d)?", e.strip()) for e in ends), ends
 
@@ -420,3 +427,76 @@ def _screen_box(b: Browser, name: str) -> list[float]:
 
 def _failed(app: ViewerApp) -> bool:
     return any(level == "error" for level, _, _ in app.notifications)
+
+
+def _catheter_file(demo_a: Path, out: Path, row: float, cols: tuple[int, int],
+                   french: float) -> float:
+    """Demo view A with a straight contrast-filled catheter of ``french`` F along image
+    row ``row`` between columns ``cols`` (Beer-Lambert, blurred as the detector), written
+    as XA DICOM with the demo's header; returns its width in px (at the isocentre)."""
+    from scipy import ndimage as ndi
+
+    from recon.io import load_angiogram
+    from recon.io.dicom_write import write_xa_dicom
+
+    angio = load_angiogram(str(demo_a))
+    g = angio.geometry
+    width_px = french / 3.0 * g.sid_mm / g.sod_mm / g.pixel_spacing_mm[0]
+    rows, colgrid = np.mgrid[0:g.rows, 0:g.cols].astype(float)
+    chord = 2.0 * np.sqrt(np.clip((width_px / 2) ** 2 - (rows - row) ** 2, 0.0, None))
+    chord[(colgrid < cols[0]) | (colgrid > cols[1])] = 0.0
+    transmitted = ndi.gaussian_filter(np.exp(-0.09 * chord), 0.8)
+    image = np.clip(np.round(angio.image * transmitted), 0, 4095).astype(np.uint16)
+    write_xa_dicom(out, image, g, bits_stored=12)
+    return width_px
+
+
+@pytest.mark.skipif(not Path(CHROMIUM).is_file(), reason=f"no browser at {CHROMIUM}")
+def test_catheter_calibration_sets_the_pixel_spacing_from_two_clicks(
+    demo_case: dict[str, Path], tmp_path: Path, artifacts_dir: Path
+) -> None:
+    """Issue 16: two clicks across the guiding catheter and its French size set the pixel
+    spacing, in the Geometry folder, with real mouse events; the clicks are no marks."""
+    sync_api = pytest.importorskip("playwright.sync_api", reason="playwright is not installed")
+    path_a = tmp_path / "catheter_a.dcm"
+    row, french = 100.0, 6.0
+    width_px = _catheter_file(demo_case["a"], path_a, row, (60, 220), french)
+    app = ViewerApp(str(path_a), str(demo_case["b"]), None, port=0,
+                    autosave_path=tmp_path / "autosave.json")
+    app.wait_ready()
+    true_spacing = app.views["a"].angio.geometry.pixel_spacing_mm[0]
+    with sync_api.sync_playwright() as pw:
+        b = Browser(pw, tmp_path / "profile", artifacts_dir)
+        try:
+            b.open(app)
+            b.page.get_by_text("Geometry", exact=True).click()  # unfold the folder
+            field = b.text_field("Catheter size (F)")
+            field.fill(f"{french:g}")
+            field.press("Enter")
+            b.page.get_by_role("button", name="Measure catheter (click its 2 edges)").click()
+            _wait(lambda: app.catheter.active, 10, "the catheter measurement to start")
+            # One click near each edge, a pixel or so off, as a hand places them.
+            _, notes = b.click("a", 140.0, row - width_px / 2 - 1.0)
+            assert notes and notes[-1][1] == "Catheter", notes
+            _, notes = b.click("a", 141.0, row + width_px / 2 + 0.7)
+            assert app.state.marks == []  # catheter clicks are not marks
+            cal = app.catheter.result
+            assert cal is not None, notes
+            assert cal.width_px == pytest.approx(width_px, rel=0.05)
+            assert cal.pixel_spacing_mm == pytest.approx(true_spacing, rel=0.05)
+            typed = app.panels.geometry.fields["a"]["pixel_spacing_mm"].value
+            assert float(typed) == pytest.approx(cal.pixel_spacing_mm, abs=1e-4)
+            b.page.wait_for_timeout(600)
+            b.page.get_by_text("Catheter calibration").scroll_into_view_if_needed()
+            b.shot("catheter_1_measured.png")
+            # Opening with this geometry uses it; clicks are marks again.
+            b.page.get_by_role("button", name="Open with this geometry").click()
+            _wait(lambda: abs(app.views["a"].angio.geometry.pixel_spacing_mm[0]
+                              - float(typed)) < 1e-6, 30, "the pair to reopen")
+            b.settle()
+            mark, _ = b.click("a", 300.0, 300.0)
+            assert mark is not None and mark.view == "a"
+            b.shot("catheter_2_reopened.png")
+        finally:
+            b.close()
+            app.stop()
