@@ -649,16 +649,17 @@ class ViewerApp:
         self.panels.show_reconstruction(rec)
         self.set_layout("Angiograms + 3D")
 
-    def set_lesion(self, start_mm: float, end_mm: float) -> dict[str, float]:
-        """Lesion ends set by the clinician (mm along the vessel): the measurements, the
-        chart and the MLD / lesion marks on the images and the model follow."""
+    def set_lesion(self, start_mm: float, end_mm: float,
+                   reference_mm: tuple[float, float] | None = None) -> dict[str, float]:
+        """Lesion ends (and reference sites, default the ends) set by the clinician (mm
+        along the vessel): the measurements, chart and MLD / lesion marks follow."""
         from viewer_app.results import lesion_measurements
 
         with self._lock:
             rec = self.reconstruction
             if rec is None or self.model is None:
                 raise ValueError("lesion: reconstruct first")
-            lesion = lesion_measurements(rec.profile, start_mm, end_mm)
+            lesion = lesion_measurements(rec.profile, start_mm, end_mm, reference_mm)
             self.lesion = lesion
             self.panels.show_lesion(rec, lesion)
             marks = {"MLD": lesion["mld_s_mm"], "lesion start": lesion["lesion_start_s_mm"],

@@ -156,6 +156,8 @@ class ResultsPanel:
     plot: viser.GuiImageHandle
     lesion_start: viser.GuiSliderHandle  # lesion ends (mm along the vessel), movable
     lesion_end: viser.GuiSliderHandle
+    reference_proximal: viser.GuiSliderHandle  # where the reference diameter is read
+    reference_distal: viser.GuiSliderHandle
     markdown: viser.GuiMarkdownHandle  # engineering figures, in a folded folder
 
 
@@ -264,7 +266,8 @@ class Panels:
         r.clinical.content = NO_RECONSTRUCTION_TEXT
         r.markdown.content = NO_RECONSTRUCTION_TEXT
         self.calibrate.markdown.content = NOT_CALIBRATED_TEXT
-        for h in (r.plot, r.lesion_start, r.lesion_end):
+        for h in (r.plot, r.lesion_start, r.lesion_end, r.reference_proximal,
+                  r.reference_distal):
             h.visible = False
 
     def show_reconstruction(self, rec: Reconstruction) -> None:
@@ -276,7 +279,9 @@ class Panels:
         lo, hi = slider_range_mm(s)
         with self.refreshing.during():
             for h, value in ((r.lesion_start, m.lesion_start_s_mm),
-                             (r.lesion_end, m.lesion_end_s_mm)):
+                             (r.lesion_end, m.lesion_end_s_mm),
+                             (r.reference_proximal, m.lesion_start_s_mm),
+                             (r.reference_distal, m.lesion_end_s_mm)):
                 h.min, h.max, h.step = lo, hi, 0.1
                 h.value = float(np.clip(np.round(value, 1), lo, hi))
                 h.visible = True
@@ -286,7 +291,7 @@ class Panels:
     def show_lesion(self, rec: Reconstruction, lesion: dict[str, float] | None) -> None:
         """The clinical table and the chart for the automatic or hand-set lesion ends."""
         self.results.clinical.content = clinical_markdown(rec, lesion)
-        self.results.plot.image = profile_plot(rec, width=420, height=300, lesion=lesion)
+        self.results.plot.image = profile_plot(rec, width=440, height=440, lesion=lesion)
 
 
 def slider_range_mm(s_mm: np.ndarray) -> tuple[float, float]:
@@ -555,20 +560,24 @@ def _results_panel(gui: viser.GuiApi, app: ViewerApp, refreshing: Refreshing) ->
                              label="Diameter along the vessel", visible=False)
         lesion_start = gui.add_slider("Lesion start (mm)", 0.0, 1.0, 0.1, 0.0, visible=False)
         lesion_end = gui.add_slider("Lesion end (mm)", 0.0, 1.0, 0.1, 1.0, visible=False)
+        ref_prox = gui.add_slider("Proximal reference (mm)", 0.0, 1.0, 0.1, 0.0,
+                                  visible=False)
+        ref_dist = gui.add_slider("Distal reference (mm)", 0.0, 1.0, 0.1, 1.0, visible=False)
 
         def lesion_moved(event: viser.GuiEvent) -> None:
             if refreshing.active:
                 return
-            app.guard("Lesion", event.client,
-                      lambda: app.set_lesion(lesion_start.value, lesion_end.value))
+            app.guard("Lesion", event.client, lambda: app.set_lesion(
+                lesion_start.value, lesion_end.value, (ref_prox.value, ref_dist.value)))
 
-        lesion_start.on_update(lesion_moved)
-        lesion_end.on_update(lesion_moved)
+        for slider in (lesion_start, lesion_end, ref_prox, ref_dist):
+            slider.on_update(lesion_moved)
         with gui.add_folder("Details (engineering)", expand_by_default=False):
             markdown = gui.add_markdown("")
     return ResultsPanel(reconstruct=reconstruct, progress=progress, layout=layout,
                         clinical=clinical, plot=plot, lesion_start=lesion_start,
-                        lesion_end=lesion_end, markdown=markdown)
+                        lesion_end=lesion_end, reference_proximal=ref_prox,
+                        reference_distal=ref_dist, markdown=markdown)
 
 
 def _export_panel(gui: viser.GuiApi, app: ViewerApp) -> ExportPanel:

@@ -164,26 +164,35 @@ def results_markdown(rec: Reconstruction) -> str:
     return "\n".join(rows)
 
 
-def lesion_measurements(profile: object, start_mm: float, end_mm: float) -> dict[str, float]:
-    """2D-QCA style measurements for lesion ends the clinician placed.
+def lesion_measurements(profile: object, start_mm: float, end_mm: float,
+                        reference_mm: tuple[float, float] | None = None) -> dict[str, float]:
+    """2D-QCA style measurements for lesion ends (and reference sites) the clinician placed.
 
-    The reference diameter runs linearly from the (smoothed) diameter at the proximal
-    end of the lesion to that at its distal end; the MLD is the smallest smoothed
-    diameter between them. ``profile`` is a recon.measure.LumenProfile (``s_mm``,
-    ``diameter_smooth_mm``, (M,) arrays). Returns a dict with the keys of
-    :class:`recon.measure.Measurements` that depend on the lesion ends, plus
-    ``proximal_reference_mm`` and ``distal_reference_mm``.
+    The reference diameter runs linearly, along the vessel, from the (smoothed)
+    diameter at the proximal reference site to that at the distal one (the
+    user-defined reference of 2D QCA); the sites are the lesion ends unless
+    ``reference_mm`` = (proximal, distal) mm gives them. The MLD is the smallest
+    smoothed diameter between the lesion ends. ``profile`` is a
+    recon.measure.LumenProfile (``s_mm``, ``diameter_smooth_mm``, (M,) arrays). Returns a
+    dict with the keys of :class:`recon.measure.Measurements` that depend on the lesion
+    ends, plus ``proximal_reference_mm``, ``distal_reference_mm`` and the sites
+    ``proximal_reference_s_mm``, ``distal_reference_s_mm``.
     """
     s = np.asarray(profile.s_mm, dtype=float)
     d = np.asarray(profile.diameter_smooth_mm, dtype=float)
-    lo, hi = sorted((float(np.clip(start_mm, s[0], s[-1])), float(np.clip(end_mm, s[0], s[-1]))))
-    inside = (s >= lo) & (s <= hi)
-    if not np.any(inside):
-        inside[int(np.argmin(np.abs(s - lo)))] = True
-    idx = np.flatnonzero(inside)
+
+    def inside(x: float) -> float:
+        return float(np.clip(x, s[0], s[-1]))
+
+    lo, hi = sorted((inside(start_mm), inside(end_mm)))
+    ref_lo, ref_hi = (lo, hi) if reference_mm is None else sorted(map(inside, reference_mm))
+    within = (s >= lo) & (s <= hi)
+    if not np.any(within):
+        within[int(np.argmin(np.abs(s - lo)))] = True
+    idx = np.flatnonzero(within)
     i_mld = int(idx[np.argmin(d[idx])])
-    d_prox, d_dist = float(np.interp(lo, s, d)), float(np.interp(hi, s, d))
-    frac = 0.0 if hi <= lo else (s[i_mld] - lo) / (hi - lo)
+    d_prox, d_dist = float(np.interp(ref_lo, s, d)), float(np.interp(ref_hi, s, d))
+    frac = 0.0 if ref_hi <= ref_lo else (s[i_mld] - ref_lo) / (ref_hi - ref_lo)
     ref = d_prox + frac * (d_dist - d_prox)
     mld = float(d[i_mld])
     return {
@@ -192,6 +201,8 @@ def lesion_measurements(profile: object, start_mm: float, end_mm: float) -> dict
         "reference_diameter_mm": ref,
         "proximal_reference_mm": d_prox,
         "distal_reference_mm": d_dist,
+        "proximal_reference_s_mm": ref_lo,
+        "distal_reference_s_mm": ref_hi,
         "diameter_stenosis_pct": 100.0 * (1.0 - mld / ref),
         "area_stenosis_pct": 100.0 * (1.0 - (mld / ref) ** 2),
         "mla_mm2": float(np.pi * mld**2 / 4.0),
@@ -248,7 +259,7 @@ def clinical_markdown(rec: Reconstruction, lesion: dict[str, float] | None = Non
     """The results a clinician reads, with labels and units; the foreshortening of the
     segment in both views and the best next view when the reconstruction has them.
 
-    ``lesion``: measurements for lesion ends the clinician moved
+    ``lesion``: measurements for lesion ends (and reference sites) the clinician moved
     (:func:`lesion_measurements`); None: the automatic analysis.
     """
     m = rec.measurements
@@ -260,6 +271,8 @@ def clinical_markdown(rec: Reconstruction, lesion: dict[str, float] | None = Non
             "mld_mm", "mld_s_mm", "reference_diameter_mm", "diameter_stenosis_pct",
             "area_stenosis_pct", "mla_mm2", "lesion_start_s_mm", "lesion_end_s_mm",
             "lesion_length_mm")}
+        v["proximal_reference_s_mm"] = v["lesion_start_s_mm"]
+        v["distal_reference_s_mm"] = v["lesion_end_s_mm"]
         v["proximal_reference_mm"] = float(np.interp(v["lesion_start_s_mm"], s, ref_curve))
         v["distal_reference_mm"] = float(np.interp(v["lesion_end_s_mm"], s, ref_curve))
         source = "automatic lesion detection" if m.has_lesion else "no lesion found"
@@ -284,7 +297,8 @@ def clinical_markdown(rec: Reconstruction, lesion: dict[str, float] | None = Non
             + _with_ci(f"{v['reference_diameter_mm']:.2f} mm", "reference_diameter_mm", ci, 2)
             + " |",
             f"| Proximal / distal reference | {v['proximal_reference_mm']:.2f} / "
-            f"{v['distal_reference_mm']:.2f} mm |",
+            f"{v['distal_reference_mm']:.2f} mm (at {v['proximal_reference_s_mm']:.1f} / "
+            f"{v['distal_reference_s_mm']:.1f} mm) |",
             "| Lesion length | "
             + _with_ci(f"{v['lesion_length_mm']:.1f} mm", "lesion_length_mm", ci, 1)
             + f", from {v['lesion_start_s_mm']:.1f} to {v['lesion_end_s_mm']:.1f} mm |",

@@ -154,6 +154,14 @@ def test_reconstruct_then_export(app: ViewerApp) -> None:
         float(np.min(rec.profile.diameter_smooth_mm[(rec.profile.s_mm >= start)
                                                     & (rec.profile.s_mm <= end)])))
     assert "set by hand" in app.panels.results.clinical.content
+    # ... and the reference sites (default: the lesion ends), each with its slider.
+    assert app.panels.results.reference_proximal.visible
+    assert lesion["proximal_reference_s_mm"] == pytest.approx(start)
+    moved = app.set_lesion(start, end, (start - 5.0, end + 5.0))
+    assert moved["mld_mm"] == lesion["mld_mm"]
+    assert moved["proximal_reference_mm"] == pytest.approx(float(np.interp(
+        start - 5.0, rec.profile.s_mm, rec.profile.diameter_smooth_mm)))
+    assert f"(at {start - 5.0:.1f} / {end + 5.0:.1f} mm)" in app.panels.results.clinical.content
     assert f"{end - start:.1f} mm" in app.panels.results.clinical.content
 
     stl = app.export("stl")

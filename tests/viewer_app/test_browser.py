@@ -156,6 +156,13 @@ class Browser:
         row = page.locator("div").filter(has=page.get_by_text(label, exact=True))
         return row.filter(has=page.locator("input")).last.locator("input").first
 
+    def slider_thumb(self, label: str) -> object:
+        """The thumb of the slider labelled ``label``."""
+        page = self.page
+        row = page.locator("div").filter(has=page.get_by_text(label, exact=True))
+        return row.filter(has=page.locator(".mantine-Slider-thumb")).last.locator(
+            ".mantine-Slider-thumb").first
+
     def dropdown_value(self, label: str) -> str:
         return self.page.get_by_label(label, exact=True).input_value()
 
@@ -381,6 +388,25 @@ def test_guided_session_from_an_empty_page_to_a_mesh(
             # "91.722401", the window width's "32.99").
             ends = b.page.locator(".mantine-Slider-markLabel").all_inner_texts()
             assert ends and all(re.fullmatch(r"\d+(\.\d)?", e.strip()) for e in ends), ends
+
+            # The proximal reference site, dragged with the mouse: the measurements and
+            # the chart follow.
+            m = rec.measurements
+            thumb = b.slider_thumb("Proximal reference (mm)")
+            thumb.scroll_into_view_if_needed()
+            box = thumb.bounding_box()
+            b.page.mouse.move(box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
+            b.page.mouse.down()
+            b.page.mouse.move(box["x"] - 40, box["y"] + box["height"] / 2, steps=8)
+            b.page.mouse.up()
+            _wait(lambda: app.lesion is not None, 10, "the lesion to follow the slider")
+            site = app.lesion["proximal_reference_s_mm"]
+            assert site < m.lesion_start_s_mm - 2.0, (site, m.lesion_start_s_mm)
+            assert app.lesion["lesion_start_s_mm"] == pytest.approx(m.lesion_start_s_mm, abs=0.1)
+            assert f"(at {site:.1f} / " in app.panels.results.clinical.content
+            b.page.wait_for_timeout(800)
+            b.page.get_by_text("Distal reference (mm)").scroll_into_view_if_needed()
+            b.shot("guided_11_reference_moved.png")
 
             with b.page.expect_download(timeout=30_000) as info:
                 b.page.get_by_role("button", name="Download report.json").click()
