@@ -71,11 +71,11 @@ def profile_plot(rec: Reconstruction, width: int = 640, height: int = 360,
     for yv in np.arange(0.0, ymax + 1e-9, y_step):  # axis ticks at round values
         y = int(px(np.array([x0]), np.array([yv]))[0, 1])
         cv2.line(img, (left, y), (width - right, y), (235, 235, 235), 1)
-        cv2.putText(img, f"{yv:g}", (left - 30, y + 5), font, 0.45, grey, 1, cv2.LINE_AA)
+        cv2.putText(img, f"{yv:g}", (left - 30, y + 5), font, 0.5, grey, 1, cv2.LINE_AA)
     x_step = _nice_step(x1 - x0, 6)
     for xv in np.arange(np.ceil(x0 / x_step) * x_step, x1 + 1e-9, x_step):
         x = int(px(np.array([xv]), np.array([0.0]))[0, 0])
-        cv2.putText(img, f"{xv:g}", (x - 8, height - bottom + 17), font, 0.45, grey, 1,
+        cv2.putText(img, f"{xv:g}", (x - 8, height - bottom + 17), font, 0.5, grey, 1,
                     cv2.LINE_AA)
     cv2.polylines(img, [px(s, ref)], False, (150, 150, 150), 1, cv2.LINE_AA)
     sites = (meas.get("proximal_reference_s_mm"), meas.get("distal_reference_s_mm"))
@@ -101,7 +101,7 @@ def profile_plot(rec: Reconstruction, width: int = 640, height: int = 360,
                     0.5, (220, 30, 30), 1, cv2.LINE_AA)
     title = "diameter (mm); grey: reference, red band: lesion"
     title += ", dashed: reference sites" if lesion is not None else ""
-    cv2.putText(img, title, (4, 16), font, 0.42, (40, 40, 40), 1, cv2.LINE_AA)
+    cv2.putText(img, title, (4, 16), font, 0.46, (40, 40, 40), 1, cv2.LINE_AA)
     if area is not None:
         _area_chart(img, s, np.asarray(area, dtype=float), (left, right, height - bottom + 26),
                     px)

@@ -319,17 +319,24 @@ def clinical_markdown(rec: Reconstruction, lesion: dict[str, float] | None = Non
 def _caveats(rec: Reconstruction, v: dict[str, float]) -> list[str]:
     """Lines under the table: the stretches whose diameter is not the lumen's alone."""
     lines = []
+    sites = {"proximal": v["proximal_reference_s_mm"], "distal": v["distal_reference_s_mm"]}
+
+    def in_it(lo: float, hi: float) -> str:
+        names = [k for k, s_mm in sites.items() if lo <= s_mm <= hi]
+        return (f"; **the {' and '.join(names)} reference site is in it: move it out**"
+                if names else "")
+
     for b in branch_stretches(rec):
         inside = b["start_mm"] <= v["mld_s_mm"] <= b["end_mm"] or (
             v["lesion_start_s_mm"] <= b["end_mm"] and b["start_mm"] <= v["lesion_end_s_mm"])
         lines.append(f"- Side branch at {b['s_mm']:.1f} mm ({b['name']}): the diameter from "
                      f"{b['start_mm']:.1f} to {b['end_mm']:.1f} mm includes its ostium "
                      "(grey band in the chart)"
-                     + ("; **the lesion overlaps it: check the lesion ends**." if inside
-                        else "."))
+                     + ("; **the lesion overlaps it: check the lesion ends**" if inside else "")
+                     + in_it(b["start_mm"], b["end_mm"]) + ".")
     for view, other in (("a", "B"), ("b", "A")):
         for lo, hi in rec.centerline_3d.overlap_stretches_mm(view):
             lines.append(f"- {lo:.1f}–{hi:.1f} mm: another vessel overlaps view "
                          f"{view.upper()}; the diameter there uses view {other}'s width "
-                         "(yellow band in the chart).")
+                         f"(yellow band in the chart){in_it(lo, hi)}.")
     return [""] + lines if lines else []

@@ -162,6 +162,11 @@ def test_reconstruct_then_export(app: ViewerApp) -> None:
     assert moved["proximal_reference_mm"] == pytest.approx(float(np.interp(
         start - 5.0, rec.profile.s_mm, rec.profile.diameter_smooth_mm)))
     assert f"(at {start - 5.0:.1f} / {end + 5.0:.1f} mm)" in app.panels.results.clinical.content
+    assert "reference site is in it" not in app.panels.results.clinical.content
+    # A reference site in the side branch's stretch is named (its diameter is not the
+    # lumen's alone); the screenshot of a dragged slider showed one there.
+    app.set_lesion(start, end, (branch["s_mm"] + 1.0, end + 5.0))
+    assert "the proximal reference site is in it" in app.panels.results.clinical.content
     assert f"{end - start:.1f} mm" in app.panels.results.clinical.content
 
     stl = app.export("stl")
