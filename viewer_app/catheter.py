@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from recon.catheter import FRENCH_RANGE, CatheterCalibration, calibrate_from_catheter
+from viewer_app.scene import OVERLAY_Z
 
 if TYPE_CHECKING:
     from viewer_app.app import ViewerApp
@@ -96,7 +97,7 @@ class CatheterTool:
         e0, e1 = cal.edges_px
         along = np.array([-(e1 - e0)[1], (e1 - e0)[0]]) * 0.75
         ticks = np.array([[e - along, e + along] for e in (e0, e1)])
-        seg = v.local_from_px(ticks.reshape(-1, 2), z=0.002).reshape(2, 2, 3).astype(
+        seg = v.local_from_px(ticks.reshape(-1, 2), z=1.5 * OVERLAY_Z).reshape(2, 2, 3).astype(
             np.float32)
         scene.add_line_segments(f"/over_{view}/catheter", seg, EDGE_COLOR, thickness=3.0,
                                 thickness_units="screen")

@@ -222,6 +222,7 @@ class Panels:
                 f"{': ' + ', '.join(missing) if missing else ''}. A value that differs from "
                 "the header's replaces it, with a warning.")
         self.geometry.note.content = text
+        self.geometry.catheter_note.content = ""  # a calibration of the files shown before
 
     def show_info(self, views: Mapping[str, View]) -> None:
         """The case table, and the warning at the top of the Marks folder for views too

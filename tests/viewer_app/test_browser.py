@@ -485,8 +485,8 @@ def test_catheter_calibration_sets_the_pixel_spacing_from_two_clicks(
     spacing, in the Geometry folder, with real mouse events; the clicks are no marks."""
     sync_api = pytest.importorskip("playwright.sync_api", reason="playwright is not installed")
     path_a = tmp_path / "catheter_a.dcm"
-    row, french = 100.0, 6.0
-    width_px = _catheter_file(demo_case["a"], path_a, row, (60, 220), french)
+    row, french = 150.0, 6.0  # top right of A, clear of the notifications
+    width_px = _catheter_file(demo_case["a"], path_a, row, (330, 500), french)
     app = ViewerApp(str(path_a), str(demo_case["b"]), None, port=0,
                     autosave_path=tmp_path / "autosave.json")
     app.wait_ready()
@@ -502,9 +502,9 @@ def test_catheter_calibration_sets_the_pixel_spacing_from_two_clicks(
             b.page.get_by_role("button", name="Measure catheter (click its 2 edges)").click()
             _wait(lambda: app.catheter.active, 10, "the catheter measurement to start")
             # One click near each edge, a pixel or so off, as a hand places them.
-            _, notes = b.click("a", 140.0, row - width_px / 2 - 1.0)
+            _, notes = b.click("a", 420.0, row - width_px / 2 - 1.0)
             assert notes and notes[-1][1] == "Catheter", notes
-            _, notes = b.click("a", 141.0, row + width_px / 2 + 0.7)
+            _, notes = b.click("a", 421.0, row + width_px / 2 + 0.7)
             assert app.state.marks == []  # catheter clicks are not marks
             cal = app.catheter.result
             assert cal is not None, notes
@@ -522,6 +522,7 @@ def test_catheter_calibration_sets_the_pixel_spacing_from_two_clicks(
             b.settle()
             mark, _ = b.click("a", 300.0, 300.0)
             assert mark is not None and mark.view == "a"
+            assert app.panels.geometry.catheter_note.content == ""  # no stale figures
             b.shot("catheter_2_reopened.png")
         finally:
             b.close()
