@@ -309,9 +309,12 @@ def clinical_markdown(rec: Reconstruction, lesion: dict[str, float] | None = Non
     if best is not None:
         fs = best.current_foreshortening_pct
         rows.append(f"| Foreshortening in A / B | {fs['a']:.0f} / {fs['b']:.0f} % |")
+        # The map knows only this segment, not the vessels around it (bench optimal-view
+        # measures how often they cross it at the recommended angle).
         rows.append(f"| Best next view | **{angle_text(*best.angles_deg)}** "
-                    f"(foreshortening {best.foreshortening_pct:.1f} %, overlap "
-                    f"{best.overlap_pct:.0f} %) |")
+                    f"(foreshortening {best.foreshortening_pct:.1f} %, the segment over "
+                    f"itself {best.overlap_pct:.0f} %; other vessels are not traced: check "
+                    "that none crosses it there) |")
     rows += _caveats(rec, v)
     return "\n".join(rows)
 

@@ -72,6 +72,9 @@ def evaluate_case(preset: str, case_seed: int) -> dict:
         "true_foreshortening_pct": foreshortening_pct(X_true, recommended),
         "true_overlap_pct": overlap_pct(X_true, r_true, recommended),
         "true_overlap_other_vessels_pct": overlap_pct(X_true, r_true, recommended, others),
+        "acquired_overlap_other_vessels_pct": {
+            "a": overlap_pct(X_true, r_true, case.view_a, others),
+            "b": overlap_pct(X_true, r_true, case.view_b_true, others)},
         "acquired_foreshortening_pct": {
             "a": foreshortening_pct(X_true, case.view_a),
             "b": foreshortening_pct(X_true, case.view_b_true)},
@@ -115,6 +118,8 @@ def run(cases: int | None = None, seed: int = 0) -> dict:
             r["true_overlap_other_vessels_pct"] for r in rows),
         "true_overlap_other_vessels_max_pct": float(max(
             r["true_overlap_other_vessels_pct"] for r in rows)),
+        "acquired_overlap_other_vessels_median_pct": median(
+            v for r in rows for v in r["acquired_overlap_other_vessels_pct"].values()),
         "acquired_foreshortening_median_pct": median(acquired),
         "truth_best_foreshortening_median_pct": median(
             r["truth_best_foreshortening_pct"] for r in rows),
@@ -148,6 +153,7 @@ def format_table(result: dict) -> str:
               f"acquired views median {result['acquired_foreshortening_median_pct']:.1f} %; "
               f"claim error median {result['claim_error_median_pct']:.2f} %; overlap with "
               f"the other vessels median {result['true_overlap_other_vessels_median_pct']:.1f}"
-              f" % (max {result['true_overlap_other_vessels_max_pct']:.1f} %); "
+              f" % (max {result['true_overlap_other_vessels_max_pct']:.1f} %; acquired views "
+              f"{result['acquired_overlap_other_vessels_median_pct']:.1f} %); "
               f"{len(result['failed'])} failed; {result['elapsed_s']:.0f} s"]
     return "\n".join(lines)
