@@ -120,7 +120,8 @@ class Browser:
 
     def shot(self, name: str) -> None:
         self.page.wait_for_timeout(400)
-        self.page.screenshot(path=str(self.out / name))
+        # a loaded machine renders WebGL slowly (30 s was once not enough for the fonts)
+        self.page.screenshot(path=str(self.out / name), timeout=120_000)
         self.shots.append(name)
 
     def screen_xy(self, view: str, col: float, row: float) -> tuple[float, float]:
