@@ -23,7 +23,7 @@ EXIT_USER_ERROR = 2
 _REAL_PROCESS = False  # main() runs as the process itself (not called in-process by a test)
 
 BENCHES = ("centerline", "calibration", "matching", "reconstruct", "speed", "intervals",
-           "sections")
+           "sections", "optimal-view")
 
 
 class _Parser(argparse.ArgumentParser):
@@ -598,7 +598,7 @@ def cmd_view(args: argparse.Namespace) -> int:
 def cmd_bench(args: argparse.Namespace) -> int:
     import importlib
 
-    module = importlib.import_module(f"recon.bench.{args.name}")
+    module = importlib.import_module(f"recon.bench.{args.name.replace('-', '_')}")
     extra = {}
     if args.suite == "tree" and args.name != "reconstruct":
         print(f"coronary3d: error: bench {args.name} has no --suite tree (reconstruct has)",

@@ -41,7 +41,9 @@ from recon.types import Angiogram
 from viewer_app import scene
 from viewer_app.access import PATCHED_VISER_VERSION, FileAccess, ServerGuard, guarded_serve
 from viewer_app.camera import PageCameras
+from viewer_app.catheter import CatheterTool
 from viewer_app.panels import Panels, build_panels
+from viewer_app.results import close_views_warning
 from viewer_app.scene import LAYOUTS, ModelNodes, View
 from viewer_app.state import (
     Autosave,
@@ -123,6 +125,8 @@ class ViewerApp:
         self.layout = LAYOUTS[0]  # what the page shows: one of scene.LAYOUTS
         self.model: ModelNodes | None = None
         self.lesion: dict[str, float] | None = None  # lesion ends set by hand (mm), if any
+        self.pair_warning: str | None = None  # views too similar to fix depth
+        self.catheter = CatheterTool(self)  # the Geometry folder's catheter calibration
 
         angio_a = load_angiogram(path_a, frame=frame_a, overrides=overrides_a)
         angio_b = load_angiogram(path_b, frame=frame_b, overrides=overrides_b)
@@ -197,6 +201,8 @@ class ViewerApp:
         """A page that connects learns what happened to the autosave at start."""
         for notice in self.autosave_notices:
             self.notify("Autosave kept aside", notice, "warning", client)
+        if self.pair_warning is not None:
+            self.notify("Views too similar", self.pair_warning, "warning", client)
 
     def notify(
         self, title: str, body: str, level: str = "info", client: object | None = None
@@ -256,6 +262,9 @@ class ViewerApp:
             for v in self.views.values():
                 scene.add_view_nodes(self.server.scene, v, self._make_click_callback(v.key))
             self.panels.show_pair(self.views)
+            self.pair_warning = close_views_warning(angio_a.geometry, angio_b.geometry)
+            if self.pair_warning is not None:  # at once, before any computation
+                self.notify("Views too similar", self.pair_warning, "warning")
             self.panels.show_geometry(
                 {k: v.angio.geometry.to_dict() for k, v in self.views.items()},
                 {k: v.display_name for k, v in self.views.items()})
@@ -416,6 +425,8 @@ class ViewerApp:
         outside the image). :attr:`last_click_ms` is the server time from the
         call to the redrawn marks and epipolar line.
         """
+        if self.catheter.active:  # two clicks across the catheter, not marks
+            return self.catheter.click(view, col, row, client)
         t0 = time.perf_counter()
         with self._lock:
             try:
@@ -638,16 +649,17 @@ class ViewerApp:
         self.panels.show_reconstruction(rec)
         self.set_layout("Angiograms + 3D")
 
-    def set_lesion(self, start_mm: float, end_mm: float) -> dict[str, float]:
-        """Lesion ends set by the clinician (mm along the vessel): the measurements, the
-        chart and the MLD / lesion marks on the images and the model follow."""
+    def set_lesion(self, start_mm: float, end_mm: float,
+                   reference_mm: tuple[float, float] | None = None) -> dict[str, float]:
+        """Lesion ends (and reference sites, default the ends) set by the clinician (mm
+        along the vessel): the measurements, chart and MLD / lesion marks follow."""
         from viewer_app.results import lesion_measurements
 
         with self._lock:
             rec = self.reconstruction
             if rec is None or self.model is None:
                 raise ValueError("lesion: reconstruct first")
-            lesion = lesion_measurements(rec.profile, start_mm, end_mm)
+            lesion = lesion_measurements(rec.profile, start_mm, end_mm, reference_mm)
             self.lesion = lesion
             self.panels.show_lesion(rec, lesion)
             marks = {"MLD": lesion["mld_s_mm"], "lesion start": lesion["lesion_start_s_mm"],
@@ -655,10 +667,6 @@ class ViewerApp:
             scene.draw_lesion_marks(self.server.scene, self.views, rec, self.model, marks,
                                     lesion["mld_mm"])
             return lesion
-
-    def view_all(self) -> None:
-        """Camera straight on both images and the model."""
-        self.set_layout("Angiograms + 3D" if self.model is not None else "Angiograms")
 
     # ================================================================ export
     def export(self, kind: str) -> bytes:

@@ -30,6 +30,7 @@ from viewer_app.results import (
     NOT_CALIBRATED_TEXT,
     calibration_markdown,
     clinical_markdown,
+    close_views_warning,
     info_markdown,
     marks_markdown,
     results_markdown,
@@ -100,6 +101,7 @@ class CasePanel:
 class MarksPanel:
     """Click mode, segments, the selected mark, undo / clear and the marks summary."""
 
+    warning: viser.GuiMarkdownHandle  # about the pair (views too similar), hidden if none
     guide: viser.GuiMarkdownHandle  # what the next click in A and in B places
     mode: viser.GuiDropdownHandle
     segment: viser.GuiDropdownHandle
@@ -118,6 +120,10 @@ class GeometryPanel:
     note: viser.GuiMarkdownHandle
     fields: dict[str, dict[str, viser.GuiTextHandle]]  # view -> key -> text field
     apply: viser.GuiButtonHandle
+    catheter_view: viser.GuiDropdownHandle  # catheter calibration: the view, "A" or "B"
+    french: viser.GuiTextHandle  # the catheter's French size
+    catheter: viser.GuiButtonHandle  # the next two clicks in that view: its edges
+    catheter_note: viser.GuiMarkdownHandle
 
     def entries(self) -> dict[str, dict[str, str]]:
         return {v: {k: str(h.value) for k, h in f.items()} for v, f in self.fields.items()}
@@ -150,6 +156,8 @@ class ResultsPanel:
     plot: viser.GuiImageHandle
     lesion_start: viser.GuiSliderHandle  # lesion ends (mm along the vessel), movable
     lesion_end: viser.GuiSliderHandle
+    reference_proximal: viser.GuiSliderHandle  # where the reference diameter is read
+    reference_distal: viser.GuiSliderHandle
     markdown: viser.GuiMarkdownHandle  # engineering figures, in a folded folder
 
 
@@ -185,7 +193,9 @@ class Panels:
                 hi = hi if hi > lo else lo + 1.0
                 lvl, wid = c.level, c.width
                 lvl.min, lvl.max, lvl.step = lo, hi, (hi - lo) / 200
-                wid.min, wid.max, wid.step = (hi - lo) / 100, (hi - lo) * 2, (hi - lo) / 200
+                # the page prints a slider's ends: no raw float (it showed "32.99")
+                wid.min = float(f"{(hi - lo) / 100:.2g}")
+                wid.max, wid.step = (hi - lo) * 2, (hi - lo) / 200
                 lvl.value, wid.value = v.level, v.width
                 fr = c.frame
                 if v.angio.n_frames > 1:
@@ -212,10 +222,17 @@ class Panels:
                 f"{': ' + ', '.join(missing) if missing else ''}. A value that differs from "
                 "the header's replaces it, with a warning.")
         self.geometry.note.content = text
+        self.geometry.catheter_note.content = ""  # a calibration of the files shown before
 
     def show_info(self, views: Mapping[str, View]) -> None:
+        """The case table, and the warning at the top of the Marks folder for views too
+        similar to fix depth (shown before any computation)."""
         a, b = views["a"], views["b"]
         self.case.info.content = info_markdown(a.angio, b.angio, a.display_name, b.display_name)
+        warning = close_views_warning(a.angio.geometry, b.angio.geometry)
+        self.marks.warning.content = "" if warning is None else f"⚠ **Views too similar**: " \
+            f"{warning}"
+        self.marks.warning.visible = warning is not None
 
     def show_marks(self, st: MarkState, last_click_ms: float, autosave_path: str | Path) -> None:
         """The segment and selection lists, and the marks summary."""
@@ -250,7 +267,8 @@ class Panels:
         r.clinical.content = NO_RECONSTRUCTION_TEXT
         r.markdown.content = NO_RECONSTRUCTION_TEXT
         self.calibrate.markdown.content = NOT_CALIBRATED_TEXT
-        for h in (r.plot, r.lesion_start, r.lesion_end):
+        for h in (r.plot, r.lesion_start, r.lesion_end, r.reference_proximal,
+                  r.reference_distal):
             h.visible = False
 
     def show_reconstruction(self, rec: Reconstruction) -> None:
@@ -259,11 +277,14 @@ class Panels:
         r.markdown.content = results_markdown(rec)
         s = np.asarray(rec.profile.s_mm, dtype=float)
         m = rec.measurements
+        lo, hi = slider_range_mm(s)
         with self.refreshing.during():
             for h, value in ((r.lesion_start, m.lesion_start_s_mm),
-                             (r.lesion_end, m.lesion_end_s_mm)):
-                h.min, h.max, h.step = float(s[0]), float(s[-1]), 0.1
-                h.value = float(np.round(value, 1))
+                             (r.lesion_end, m.lesion_end_s_mm),
+                             (r.reference_proximal, m.lesion_start_s_mm),
+                             (r.reference_distal, m.lesion_end_s_mm)):
+                h.min, h.max, h.step = lo, hi, 0.1
+                h.value = float(np.clip(np.round(value, 1), lo, hi))
                 h.visible = True
         self.show_lesion(rec, None)
         r.plot.visible = True
@@ -271,7 +292,15 @@ class Panels:
     def show_lesion(self, rec: Reconstruction, lesion: dict[str, float] | None) -> None:
         """The clinical table and the chart for the automatic or hand-set lesion ends."""
         self.results.clinical.content = clinical_markdown(rec, lesion)
-        self.results.plot.image = profile_plot(rec, width=420, height=300, lesion=lesion)
+        self.results.plot.image = profile_plot(rec, width=440, height=440, lesion=lesion)
+
+
+def slider_range_mm(s_mm: np.ndarray) -> tuple[float, float]:
+    """A lesion slider's (min, max) in mm on its 0.1 mm grid, inside the profile's arc
+    length (s_mm: (M,) increasing): the page prints them as they are."""
+    lo = float(np.ceil(np.round(float(s_mm[0]) * 10.0, 6)) / 10.0)
+    hi = float(np.floor(np.round(float(s_mm[-1]) * 10.0, 6)) / 10.0)
+    return round(lo, 1), round(max(hi, lo + 0.1), 1)
 
 
 def build_panels(gui: viser.GuiApi, app: ViewerApp) -> Panels:
@@ -378,6 +407,7 @@ def _marks_panel(gui: viser.GuiApi, app: ViewerApp, refreshing: Refreshing) -> M
     # Python fires these callbacks later on viser's event loop (client None), when
     # the value read may already be stale: only a user's change may act.
     with gui.add_folder("Marks"):
+        warning = gui.add_markdown("", visible=False)
         guide = gui.add_markdown("")
         mode = gui.add_dropdown("Mode", [MODE_LABELS[m] for m in MODES],
                                 initial_value=MODE_LABELS["guided"])
@@ -424,8 +454,9 @@ def _marks_panel(gui: viser.GuiApi, app: ViewerApp, refreshing: Refreshing) -> M
             app.clear()
 
         summary = gui.add_markdown("")
-    return MarksPanel(guide=guide, mode=mode, segment=segment, new_segment=new_segment,
-                      select=select, undo=undo, clear=clear, summary=summary)
+    return MarksPanel(warning=warning, guide=guide, mode=mode, segment=segment,
+                      new_segment=new_segment, select=select, undo=undo, clear=clear,
+                      summary=summary)
 
 
 GEOMETRY_WORDS = {"sid_mm": "SID (mm)", "sod_mm": "SOD (mm)",
@@ -438,7 +469,20 @@ def _geometry_panel(gui: viser.GuiApi, app: ViewerApp) -> GeometryPanel:
         fields = {view: {key: gui.add_text(f"{view.upper()} {word}", "")
                          for key, word in GEOMETRY_WORDS.items()} for view in VIEW_KEYS}
         apply = gui.add_button("Open with this geometry", icon=viser.Icon.CHECK)
-    panel = GeometryPanel(note=note, fields=fields, apply=apply)
+        gui.add_markdown("**Catheter calibration** (as in 2D QCA): the guiding catheter's "
+                         "French size (1 F = 1/3 mm) sets the pixel spacing at its depth.")
+        catheter_view = gui.add_dropdown("Catheter in", ["A", "B"], initial_value="A")
+        french = gui.add_text("Catheter size (F)", "6")
+        catheter = gui.add_button("Measure catheter (click its 2 edges)",
+                                  icon=viser.Icon.RULER_MEASURE)
+        catheter_note = gui.add_markdown("")
+    panel = GeometryPanel(note=note, fields=fields, apply=apply, catheter_view=catheter_view,
+                          french=french, catheter=catheter, catheter_note=catheter_note)
+
+    @catheter.on_click
+    def _(event: viser.GuiEvent) -> None:
+        app.catheter.start(str(catheter_view.value).lower(), str(french.value),
+                           client=event.client)
 
     @apply.on_click
     def _(event: viser.GuiEvent) -> None:
@@ -517,20 +561,24 @@ def _results_panel(gui: viser.GuiApi, app: ViewerApp, refreshing: Refreshing) ->
                              label="Diameter along the vessel", visible=False)
         lesion_start = gui.add_slider("Lesion start (mm)", 0.0, 1.0, 0.1, 0.0, visible=False)
         lesion_end = gui.add_slider("Lesion end (mm)", 0.0, 1.0, 0.1, 1.0, visible=False)
+        ref_prox = gui.add_slider("Proximal reference (mm)", 0.0, 1.0, 0.1, 0.0,
+                                  visible=False)
+        ref_dist = gui.add_slider("Distal reference (mm)", 0.0, 1.0, 0.1, 1.0, visible=False)
 
         def lesion_moved(event: viser.GuiEvent) -> None:
             if refreshing.active:
                 return
-            app.guard("Lesion", event.client,
-                      lambda: app.set_lesion(lesion_start.value, lesion_end.value))
+            app.guard("Lesion", event.client, lambda: app.set_lesion(
+                lesion_start.value, lesion_end.value, (ref_prox.value, ref_dist.value)))
 
-        lesion_start.on_update(lesion_moved)
-        lesion_end.on_update(lesion_moved)
+        for slider in (lesion_start, lesion_end, ref_prox, ref_dist):
+            slider.on_update(lesion_moved)
         with gui.add_folder("Details (engineering)", expand_by_default=False):
             markdown = gui.add_markdown("")
     return ResultsPanel(reconstruct=reconstruct, progress=progress, layout=layout,
                         clinical=clinical, plot=plot, lesion_start=lesion_start,
-                        lesion_end=lesion_end, markdown=markdown)
+                        lesion_end=lesion_end, reference_proximal=ref_prox,
+                        reference_distal=ref_dist, markdown=markdown)
 
 
 def _export_panel(gui: viser.GuiApi, app: ViewerApp) -> ExportPanel:

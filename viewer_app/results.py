@@ -17,6 +17,7 @@ from recon.geometry import MIN_VIEW_SEPARATION_DEG, view_separation_deg
 
 if TYPE_CHECKING:
     from recon.calibration import CalibrationResult
+    from recon.geometry import ViewGeometry
     from recon.pipeline import Reconstruction
     from recon.types import Angiogram
     from viewer_app.state import MarkState
@@ -25,8 +26,10 @@ __all__ = [
     "NOT_CALIBRATED_TEXT",
     "NO_RECONSTRUCTION_TEXT",
     "angle_text",
+    "branch_stretches",
     "calibration_markdown",
     "clinical_markdown",
+    "close_views_warning",
     "lesion_measurements",
     "fmt",
     "info_markdown",
@@ -74,11 +77,22 @@ def info_markdown(angio_a: Angiogram, angio_b: Angiogram, name_a: str, name_b: s
                 f"{angio_b.frame_index + 1}/{angio_b.n_frames} |")
     separation = view_separation_deg(ga, gb)
     rows.append(f"\nViews {separation:.0f}° apart.")
-    if separation < MIN_VIEW_SEPARATION_DEG:
-        rows.append(f"⚠ **Views too similar**: at least {MIN_VIEW_SEPARATION_DEG:.0f}° are "
-                    "needed to fix depth; Reconstruct will refuse this pair. Open two views "
-                    "further apart.")
+    warning = close_views_warning(ga, gb)
+    if warning is not None:
+        rows.append(f"⚠ **Views too similar**: {warning}")
     return "\n".join(rows)
+
+
+def close_views_warning(view_a: ViewGeometry, view_b: ViewGeometry) -> str | None:
+    """The warning for two views whose central rays are less than
+    :data:`recon.geometry.MIN_VIEW_SEPARATION_DEG` apart (the separation the
+    reconstruction refuses, :func:`recon.geometry.view_separation_deg`); None otherwise."""
+    separation = view_separation_deg(view_a, view_b)
+    if separation >= MIN_VIEW_SEPARATION_DEG:
+        return None
+    return (f"the views are {separation:.0f}° apart and at least "
+            f"{MIN_VIEW_SEPARATION_DEG:.0f}° are needed to fix depth; Reconstruct will "
+            "refuse this pair. Open two views further apart.")
 
 
 def marks_markdown(state: MarkState, last_click_ms: float, autosave_path: str | Path) -> str:
@@ -150,26 +164,35 @@ def results_markdown(rec: Reconstruction) -> str:
     return "\n".join(rows)
 
 
-def lesion_measurements(profile: object, start_mm: float, end_mm: float) -> dict[str, float]:
-    """2D-QCA style measurements for lesion ends the clinician placed.
+def lesion_measurements(profile: object, start_mm: float, end_mm: float,
+                        reference_mm: tuple[float, float] | None = None) -> dict[str, float]:
+    """2D-QCA style measurements for lesion ends (and reference sites) the clinician placed.
 
-    The reference diameter runs linearly from the (smoothed) diameter at the proximal
-    end of the lesion to that at its distal end; the MLD is the smallest smoothed
-    diameter between them. ``profile`` is a recon.measure.LumenProfile (``s_mm``,
-    ``diameter_smooth_mm``, (M,) arrays). Returns a dict with the keys of
-    :class:`recon.measure.Measurements` that depend on the lesion ends, plus
-    ``proximal_reference_mm`` and ``distal_reference_mm``.
+    The reference diameter runs linearly, along the vessel, from the (smoothed)
+    diameter at the proximal reference site to that at the distal one (the
+    user-defined reference of 2D QCA); the sites are the lesion ends unless
+    ``reference_mm`` = (proximal, distal) mm gives them. The MLD is the smallest
+    smoothed diameter between the lesion ends. ``profile`` is a
+    recon.measure.LumenProfile (``s_mm``, ``diameter_smooth_mm``, (M,) arrays). Returns a
+    dict with the keys of :class:`recon.measure.Measurements` that depend on the lesion
+    ends, plus ``proximal_reference_mm``, ``distal_reference_mm`` and the sites
+    ``proximal_reference_s_mm``, ``distal_reference_s_mm``.
     """
     s = np.asarray(profile.s_mm, dtype=float)
     d = np.asarray(profile.diameter_smooth_mm, dtype=float)
-    lo, hi = sorted((float(np.clip(start_mm, s[0], s[-1])), float(np.clip(end_mm, s[0], s[-1]))))
-    inside = (s >= lo) & (s <= hi)
-    if not np.any(inside):
-        inside[int(np.argmin(np.abs(s - lo)))] = True
-    idx = np.flatnonzero(inside)
+
+    def inside(x: float) -> float:
+        return float(np.clip(x, s[0], s[-1]))
+
+    lo, hi = sorted((inside(start_mm), inside(end_mm)))
+    ref_lo, ref_hi = (lo, hi) if reference_mm is None else sorted(map(inside, reference_mm))
+    within = (s >= lo) & (s <= hi)
+    if not np.any(within):
+        within[int(np.argmin(np.abs(s - lo)))] = True
+    idx = np.flatnonzero(within)
     i_mld = int(idx[np.argmin(d[idx])])
-    d_prox, d_dist = float(np.interp(lo, s, d)), float(np.interp(hi, s, d))
-    frac = 0.0 if hi <= lo else (s[i_mld] - lo) / (hi - lo)
+    d_prox, d_dist = float(np.interp(ref_lo, s, d)), float(np.interp(ref_hi, s, d))
+    frac = 0.0 if ref_hi <= ref_lo else (s[i_mld] - ref_lo) / (ref_hi - ref_lo)
     ref = d_prox + frac * (d_dist - d_prox)
     mld = float(d[i_mld])
     return {
@@ -178,6 +201,8 @@ def lesion_measurements(profile: object, start_mm: float, end_mm: float) -> dict
         "reference_diameter_mm": ref,
         "proximal_reference_mm": d_prox,
         "distal_reference_mm": d_dist,
+        "proximal_reference_s_mm": ref_lo,
+        "distal_reference_s_mm": ref_hi,
         "diameter_stenosis_pct": 100.0 * (1.0 - mld / ref),
         "area_stenosis_pct": 100.0 * (1.0 - (mld / ref) ** 2),
         "mla_mm2": float(np.pi * mld**2 / 4.0),
@@ -187,11 +212,54 @@ def lesion_measurements(profile: object, start_mm: float, end_mm: float) -> dict
     }
 
 
+def branch_stretches(rec: Reconstruction) -> list[dict[str, float | str]]:
+    """Stretches of the segment where a side branch leaves it, from the clicked features.
+
+    A feature (clicked in both views) is triangulated with the reconstruction's
+    geometry; when it lies on the segment (within the larger of 1.5 mm and twice the
+    local radius of the 3D centerline), at least one reference diameter D from either
+    end, it is a branch point at arc length s. There the side branch's ostium widens the
+    vessel's silhouette in both views, so the measured diameter from s - D to s + 1.5 D
+    (the branch leaves distally) is the main vessel plus part of the branch. Returns
+    dicts ``name``, ``s_mm``, ``start_mm``, ``end_mm``, proximal first.
+    """
+    from recon.geometry import triangulate
+
+    features = getattr(rec.seeds, "features", ())
+    if not features:
+        return []
+    c = rec.centerline_3d
+    s = np.asarray(c.s_mm, dtype=float)
+    ref = np.asarray(rec.profile.reference_diameter_mm, dtype=float)
+    X = triangulate(np.array([f.a_px for f in features], float),
+                    np.array([f.b_px for f in features], float), rec.view_a, rec.view_b)
+    dist = np.linalg.norm(np.asarray(c.X_world)[None, :, :] - X[:, None, :], axis=-1)
+    nearest = np.argmin(dist, axis=1)
+    out = []
+    for f, i, d_mm in zip(features, nearest, dist[np.arange(len(features)), nearest],
+                          strict=True):
+        d_ref = float(ref[i])
+        on_vessel = d_mm <= max(1.5, 2.0 * float(c.radius_mm[i]))
+        if on_vessel and s[0] + d_ref <= s[i] <= s[-1] - d_ref:
+            out.append({"name": f.name or "feature", "s_mm": float(s[i]),
+                        "start_mm": float(max(s[i] - d_ref, s[0])),
+                        "end_mm": float(min(s[i] + 1.5 * d_ref, s[-1]))})
+    return sorted(out, key=lambda b: b["s_mm"])
+
+
+def _with_ci(text: str, key: str, ci: dict, digits: int) -> str:
+    """``text`` followed by the 95 % interval of ``key`` when there is one."""
+    if key not in ci:
+        return text
+    lo, hi = ci[key]
+    return f"{text} ({lo:.{digits}f}–{hi:.{digits}f})"
+
+
 def clinical_markdown(rec: Reconstruction, lesion: dict[str, float] | None = None) -> str:
     """The results a clinician reads, with labels and units; the foreshortening of the
     segment in both views and the best next view when the reconstruction has them.
 
-    ``lesion``: measurements for lesion ends the clinician moved
+    ``lesion``: measurements for lesion ends (and reference sites) the clinician moved
     (:func:`lesion_measurements`); None: the automatic analysis.
     """
     m = rec.measurements
@@ -203,28 +271,75 @@ def clinical_markdown(rec: Reconstruction, lesion: dict[str, float] | None = Non
             "mld_mm", "mld_s_mm", "reference_diameter_mm", "diameter_stenosis_pct",
             "area_stenosis_pct", "mla_mm2", "lesion_start_s_mm", "lesion_end_s_mm",
             "lesion_length_mm")}
+        v["proximal_reference_s_mm"] = v["lesion_start_s_mm"]
+        v["distal_reference_s_mm"] = v["lesion_end_s_mm"]
         v["proximal_reference_mm"] = float(np.interp(v["lesion_start_s_mm"], s, ref_curve))
         v["distal_reference_mm"] = float(np.interp(v["lesion_end_s_mm"], s, ref_curve))
         source = "automatic lesion detection" if m.has_lesion else "no lesion found"
     else:
         v, source = lesion, "lesion ends set by hand"
-    rows = [f"**3D QCA** ({source})", "", "| | |", "| --- | --- |",
-            f"| Minimal lumen diameter | **{v['mld_mm']:.2f} mm** |",
-            f"| % diameter stenosis | **{v['diameter_stenosis_pct']:.0f} %** |",
-            f"| % area stenosis | {v['area_stenosis_pct']:.0f} % |",
-            f"| Minimal lumen area | {v['mla_mm2']:.2f} mm² |",
-            f"| Reference diameter at the MLD | {v['reference_diameter_mm']:.2f} mm |",
+    # The 95 % intervals are those of the automatic analysis (report.json
+    # measurements_ci95); lesion ends set by hand have none, and the segment length
+    # does not depend on them.
+    ci_all = rec.intervals.ci95 if getattr(rec, "intervals", None) is not None else {}
+    ci = ci_all if lesion is None else {}
+    mld = _with_ci(f"**{v['mld_mm']:.2f} mm**", "mld_mm", ci, 2)
+    ds = _with_ci(f"**{v['diameter_stenosis_pct']:.0f} %**", "diameter_stenosis_pct", ci, 0)
+    rows = [f"**3D QCA** ({source}" + ("; 95 % intervals in brackets" if ci else "") + ")",
+            "", "| | |", "| --- | --- |",
+            f"| Minimal lumen diameter | {mld} |",
+            f"| % diameter stenosis | {ds} |",
+            "| % area stenosis | "
+            + _with_ci(f"{v['area_stenosis_pct']:.0f} %", "area_stenosis_pct", ci, 0) + " |",
+            "| Minimal lumen area | "
+            + _with_ci(f"{v['mla_mm2']:.2f} mm²", "mla_mm2", ci, 2) + " |",
+            "| Reference diameter at the MLD | "
+            + _with_ci(f"{v['reference_diameter_mm']:.2f} mm", "reference_diameter_mm", ci, 2)
+            + " |",
             f"| Proximal / distal reference | {v['proximal_reference_mm']:.2f} / "
-            f"{v['distal_reference_mm']:.2f} mm |",
-            f"| Lesion length | {v['lesion_length_mm']:.1f} mm "
-            f"({v['lesion_start_s_mm']:.1f}–{v['lesion_end_s_mm']:.1f} mm) |",
+            f"{v['distal_reference_mm']:.2f} mm (at {v['proximal_reference_s_mm']:.1f} / "
+            f"{v['distal_reference_s_mm']:.1f} mm) |",
+            "| Lesion length | "
+            + _with_ci(f"{v['lesion_length_mm']:.1f} mm", "lesion_length_mm", ci, 1)
+            + f", from {v['lesion_start_s_mm']:.1f} to {v['lesion_end_s_mm']:.1f} mm |",
             f"| MLD position | {v['mld_s_mm']:.1f} mm from the proximal end |",
-            f"| Segment length | {m.segment_length_mm:.1f} mm |"]
+            "| Segment length | "
+            + _with_ci(f"{m.segment_length_mm:.1f} mm", "segment_length_mm", ci_all, 1) + " |"]
     best = getattr(rec, "optimal_view", None)
     if best is not None:
         fs = best.current_foreshortening_pct
         rows.append(f"| Foreshortening in A / B | {fs['a']:.0f} / {fs['b']:.0f} % |")
+        # The map knows only this segment, not the vessels around it (bench optimal-view
+        # measures how often they cross it at the recommended angle).
         rows.append(f"| Best next view | **{angle_text(*best.angles_deg)}** "
-                    f"(foreshortening {best.foreshortening_pct:.1f} %, overlap "
-                    f"{best.overlap_pct:.0f} %) |")
+                    f"(foreshortening {best.foreshortening_pct:.1f} %, the segment over "
+                    f"itself {best.overlap_pct:.0f} %; other vessels are not traced: check "
+                    "that none crosses it there) |")
+    rows += _caveats(rec, v)
     return "\n".join(rows)
+
+
+def _caveats(rec: Reconstruction, v: dict[str, float]) -> list[str]:
+    """Lines under the table: the stretches whose diameter is not the lumen's alone."""
+    lines = []
+    sites = {"proximal": v["proximal_reference_s_mm"], "distal": v["distal_reference_s_mm"]}
+
+    def in_it(lo: float, hi: float) -> str:
+        names = [k for k, s_mm in sites.items() if lo <= s_mm <= hi]
+        return (f"; **the {' and '.join(names)} reference site is in it: move it out**"
+                if names else "")
+
+    for b in branch_stretches(rec):
+        inside = b["start_mm"] <= v["mld_s_mm"] <= b["end_mm"] or (
+            v["lesion_start_s_mm"] <= b["end_mm"] and b["start_mm"] <= v["lesion_end_s_mm"])
+        lines.append(f"- Side branch at {b['s_mm']:.1f} mm ({b['name']}): the diameter from "
+                     f"{b['start_mm']:.1f} to {b['end_mm']:.1f} mm includes its ostium "
+                     "(grey band in the chart)"
+                     + ("; **the lesion overlaps it: check the lesion ends**" if inside else "")
+                     + in_it(b["start_mm"], b["end_mm"]) + ".")
+    for view, other in (("a", "B"), ("b", "A")):
+        for lo, hi in rec.centerline_3d.overlap_stretches_mm(view):
+            lines.append(f"- {lo:.1f}–{hi:.1f} mm: another vessel overlaps view "
+                         f"{view.upper()}; the diameter there uses view {other}'s width "
+                         f"(yellow band in the chart){in_it(lo, hi)}.")
+    return [""] + lines if lines else []

@@ -186,6 +186,8 @@ class MarkState:
         self.marks: list[Mark] = []
         self.segment_names: list[str] = ["Segment 1"]
         self.feature_names: dict[int, str] = {}  # feature group -> name (from a seeds file)
+        # branch name -> (parent segment, bifurcation feature), seeds format v2
+        self.segment_links: dict[str, tuple[str, str]] = {}
         self.current_segment: int = 0
         self.selected_id: int | None = None
         self._next_id: int = 1
@@ -215,6 +217,7 @@ class MarkState:
             self.current_segment,
             self.selected_id,
             self._next_id,
+            dict(self.segment_links),
         )
 
     def _push(self) -> None:
@@ -232,6 +235,7 @@ class MarkState:
             self.current_segment,
             self.selected_id,
             self._next_id,
+            self.segment_links,
         ) = self._history.pop()
         return True
 
@@ -240,6 +244,7 @@ class MarkState:
         self._push()
         self.marks = []
         self.segment_names = ["Segment 1"]
+        self.segment_links = {}
         self.current_segment = 0
         self.selected_id = None
 
@@ -451,8 +456,13 @@ class MarkState:
 
     # ------------------------------------------------------------ seeds
     def to_seeds(self) -> Seeds:
-        """The complete marks as seeds: segments with both ends in both views, paired features."""
-        segments = []
+        """The complete marks as seeds: segments with both ends in both views, paired features.
+
+        A branch (:attr:`segment_links`) keeps its parent and bifurcation when both are
+        complete (the parent earlier); otherwise it is written as a root for now."""
+        features = self._complete_features()
+        feature_names = {f.name for f in features}
+        segments: list[Segment] = []
         for g, name in enumerate(self.segment_names):
             views: dict[str, list[tuple[float, float]]] = {}
             for view in VIEWS:
@@ -470,7 +480,15 @@ class MarkState:
                 ]
                 views[view] = [ends["proximal"], *way, ends["distal"]]
             if len(views) == 2:
-                segments.append(Segment(name=name, a_px=tuple(views["a"]), b_px=tuple(views["b"])))
+                parent, bifurcation = self.segment_links.get(name, (None, None))
+                if parent not in {s.name for s in segments} or bifurcation not in feature_names:
+                    parent = bifurcation = None
+                segments.append(Segment(name=name, a_px=tuple(views["a"]), b_px=tuple(views["b"]),
+                                        parent=parent, bifurcation=bifurcation))
+        return Seeds(segments=tuple(segments), features=features)
+
+    def _complete_features(self) -> tuple[Feature, ...]:
+        """Features with a mark in both views, by group, with their names."""
         features = []
         groups = sorted({m.group for m in self.marks if m.kind == "feature"})
         for g in groups:
@@ -478,7 +496,7 @@ class MarkState:
             if len(pts) == 2:
                 name = self.feature_names.get(g) or f"feature {g + 1}"
                 features.append(Feature(name=name, a_px=pts["a"], b_px=pts["b"]))
-        return Seeds(segments=tuple(segments), features=tuple(features))
+        return tuple(features)
 
     def missing(self) -> list[str]:
         """One line per incomplete item, e.g. 'Segment 1: distal end missing in B'."""
@@ -520,6 +538,8 @@ class MarkState:
         self.marks = marks
         self.segment_names = [s.name for s in seeds.segments] or ["Segment 1"]
         self.feature_names = {g: f.name for g, f in enumerate(seeds.features) if f.name}
+        self.segment_links = {s.name: (s.parent, s.bifurcation) for s in seeds.segments
+                              if s.parent is not None and s.bifurcation is not None}
         self.current_segment = 0
         self.selected_id = None
         self._next_id = next_id
@@ -534,6 +554,7 @@ class MarkState:
             "feature_names": {str(g): n for g, n in sorted(self.feature_names.items())},
             "current_segment": self.current_segment,
             "mode": self.mode,
+            "segment_links": {k: list(v) for k, v in sorted(self.segment_links.items())},
         }
         return doc
 
@@ -567,10 +588,24 @@ class MarkState:
             for key, name in features_in.items():
                 if isinstance(key, str) and key.isdigit() and isinstance(name, str):
                     feature_names[int(key)] = name
+        links_in = viewer.get("segment_links")
+        links = {}
+        if isinstance(links_in, dict):
+            for name, link in links_in.items():
+                if (isinstance(link, list) and len(link) == 2
+                        and all(isinstance(x, str) for x in (name, *link))):
+                    links[name] = (link[0], link[1])
+        elif links_in is None:  # an autosave from before the links: its seeds part has them
+            for entry in doc.get("segments") or ():
+                link = [entry.get(k) for k in ("name", "parent", "bifurcation")] \
+                    if isinstance(entry, dict) else []
+                if link and all(isinstance(x, str) for x in link):
+                    links[link[0]] = (link[1], link[2])
         self._push()
         self.marks = marks
         self.segment_names = names or ["Segment 1"]
         self.feature_names = feature_names
+        self.segment_links = links
         current = viewer.get("current_segment", 0)
         current = current if isinstance(current, int) and not isinstance(current, bool) else 0
         self.current_segment = min(max(current, 0), len(self.segment_names) - 1)

@@ -3,12 +3,6 @@
 from __future__ import annotations
 
 import http.client
-import os
-import re
-import signal
-import subprocess
-import sys
-import time
 import urllib.error
 import urllib.request
 from pathlib import Path
@@ -114,25 +108,11 @@ def test_a_symlink_out_of_the_output_folder_is_refused(app: ViewerApp, tmp_path:
     assert not list(target.iterdir())
 
 
-def test_coronary3d_view_prints_an_address_with_its_token(tmp_path: Path) -> None:
-    env = {k: v for k, v in os.environ.items() if k != "CORONARY3D_DEBUG"}
-    env["XDG_CACHE_HOME"] = str(tmp_path / "cache")
-    proc = subprocess.Popen([sys.executable, "-m", "recon.cli", "view", "--port", "0"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
-                            cwd=tmp_path)
-    try:
-        assert proc.stdout is not None
-        line = proc.stdout.readline()
-        match = re.search(r"coronary3d viewer: (http://127\.0\.0\.1:(\d+)/\?token=([\w-]+))",
-                          line)
-        assert match, line
-        url, port = match[1], int(match[2])
-        with urllib.request.urlopen(url, timeout=10) as resp:
-            assert resp.status == 200
-        with pytest.raises(urllib.error.HTTPError) as err:
-            urllib.request.urlopen(f"http://127.0.0.1:{port}/", timeout=10)
-        assert err.value.code == 403
-    finally:
-        proc.send_signal(signal.SIGTERM)
-        proc.wait(timeout=30)
-    time.sleep(0)
+def test_coronary3d_view_prints_an_address_with_its_token(start_view) -> None:
+    view = start_view()
+    assert view.url is not None, (view.line, view.stop())
+    with urllib.request.urlopen(view.url, timeout=10) as resp:
+        assert resp.status == 200
+    with pytest.raises(urllib.error.HTTPError) as err:
+        urllib.request.urlopen(f"http://127.0.0.1:{view.port}/", timeout=10)
+    assert err.value.code == 403

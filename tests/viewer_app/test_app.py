@@ -16,6 +16,8 @@ import trimesh
 from recon.io import load_seeds
 from recon.seeds import seeds_from_dict
 from viewer_app import ViewerApp, run_viewer
+from viewer_app.plot import BRANCH_BAND
+from viewer_app.results import branch_stretches
 
 
 def _line_distance_px(seg: np.ndarray, point_px: np.ndarray) -> float:
@@ -117,8 +119,32 @@ def test_reconstruct_then_export(app: ViewerApp) -> None:
     assert app.panels.results.plot.visible
     m = rec.measurements
     clinical = app.panels.results.clinical.content
-    assert f"| Minimal lumen diameter | **{m.mld_mm:.2f} mm** |" in clinical
-    assert f"| % diameter stenosis | **{m.diameter_stenosis_pct:.0f} %** |" in clinical
+    ci = rec.intervals.ci95  # report.json measurements_ci95, beside each figure (issue 14)
+    assert (f"| Minimal lumen diameter | **{m.mld_mm:.2f} mm** ({ci['mld_mm'][0]:.2f}–"
+            f"{ci['mld_mm'][1]:.2f}) |") in clinical
+    lo, hi = ci["diameter_stenosis_pct"]
+    assert (f"| % diameter stenosis | **{m.diameter_stenosis_pct:.0f} %** ({lo:.0f}–{hi:.0f})"
+            " |") in clinical
+    lo, hi = ci["lesion_length_mm"]
+    assert f"| Lesion length | {m.lesion_length_mm:.1f} mm ({lo:.1f}–{hi:.1f}), from " in clinical
+    # The lesion sliders' ends are on their 0.1 mm grid (the page printed "91.722401").
+    s = rec.profile.s_mm
+    for h in (app.panels.results.lesion_start, app.panels.results.lesion_end):
+        assert f"{h.max:g}" == f"{h.max:.1f}".rstrip("0").rstrip(".")
+        assert f"{h.min:g}" == f"{h.min:.1f}".rstrip("0").rstrip(".")
+        assert s[0] <= h.min < s[0] + 0.1 and s[-1] - 0.1 < h.max <= s[-1]
+    # The demo's side branch (feature "bifurcation 1", at 21.5 mm in truth.json) widens
+    # the measured diameter by ~0.5 mm: the spike is in the profile, not the chart, and
+    # the page says where it is rather than hiding it.
+    excess = rec.profile.diameter_mm - rec.profile.reference_diameter_mm
+    near = (s > 10.0) & (s < 40.0)
+    s_spike = float(s[near][np.argmax(excess[near])])
+    assert float(np.max(excess[near])) > 0.3
+    (branch,) = branch_stretches(rec)
+    assert abs(branch["s_mm"] - 21.5) < 1.0 and branch["start_mm"] < s_spike < branch["end_mm"]
+    assert f"Side branch at {branch['s_mm']:.1f} mm (bifurcation 1)" in clinical
+    chart = app.panels.results.plot.image
+    assert np.count_nonzero(np.all(chart == BRANCH_BAND, axis=-1)) > 500
     assert "Table 3" not in clinical and "ms" not in clinical  # engineering folded away
     # Moving the lesion ends: the measurements, chart and marks follow.
     start, end = m.lesion_start_s_mm - 3.0, m.lesion_end_s_mm + 3.0
@@ -128,6 +154,19 @@ def test_reconstruct_then_export(app: ViewerApp) -> None:
         float(np.min(rec.profile.diameter_smooth_mm[(rec.profile.s_mm >= start)
                                                     & (rec.profile.s_mm <= end)])))
     assert "set by hand" in app.panels.results.clinical.content
+    # ... and the reference sites (default: the lesion ends), each with its slider.
+    assert app.panels.results.reference_proximal.visible
+    assert lesion["proximal_reference_s_mm"] == pytest.approx(start)
+    moved = app.set_lesion(start, end, (start - 5.0, end + 5.0))
+    assert moved["mld_mm"] == lesion["mld_mm"]
+    assert moved["proximal_reference_mm"] == pytest.approx(float(np.interp(
+        start - 5.0, rec.profile.s_mm, rec.profile.diameter_smooth_mm)))
+    assert f"(at {start - 5.0:.1f} / {end + 5.0:.1f} mm)" in app.panels.results.clinical.content
+    assert "reference site is in it" not in app.panels.results.clinical.content
+    # A reference site in the side branch's stretch is named (its diameter is not the
+    # lumen's alone); the screenshot of a dragged slider showed one there.
+    app.set_lesion(start, end, (branch["s_mm"] + 1.0, end + 5.0))
+    assert "the proximal reference site is in it" in app.panels.results.clinical.content
     assert f"{end - start:.1f} mm" in app.panels.results.clinical.content
 
     stl = app.export("stl")
@@ -169,6 +208,31 @@ def test_bad_files_become_notifications(app: ViewerApp, tmp_path: Path) -> None:
     assert app.load_seeds(broken_seeds) is False
     assert app.notifications[-1][0] == "error"
     assert app.calibrate is not None and app.click("a", 100.0, 100.0) is not None  # still alive
+
+
+def test_views_too_similar_are_named_as_soon_as_the_pair_is_open(app: ViewerApp) -> None:
+    """Issue 16: a pair less than 25 degrees apart is named in the page when it opens,
+    before any Calibrate or Reconstruct (the pipeline would refuse it)."""
+    from recon.geometry import view_separation_deg
+    from recon.io.overrides import GeometryOverrides
+
+    assert not app.panels.marks.warning.visible  # the demo's views are 60 degrees apart
+    ga = app.views["a"].angio.geometry
+    near = GeometryOverrides(alpha_deg=ga.alpha_deg + 10.0, beta_deg=ga.beta_deg)
+    path_a, path_b = app.views["a"].angio.path, app.views["b"].angio.path
+    n = len(app.notifications)
+    assert app.open_pair(path_a, path_b, overrides_b=near)
+    separation = view_separation_deg(ga, app.views["b"].angio.geometry)
+    assert 5.0 < separation < 25.0
+    warned = [(level, body) for level, title, body in app.notifications[n:]
+              if title == "Views too similar"]
+    assert warned and warned[0][0] == "warning" and f"{separation:.0f}°" in warned[0][1]
+    assert app.panels.marks.warning.visible
+    assert "Views too similar" in app.panels.marks.warning.content
+    assert "Views too similar" in app.panels.case.info.content
+    assert app.reconstruction is None and app.calibration is None
+    assert app.open_pair(path_a, path_b)  # a pair far enough apart: the warning goes
+    assert not app.panels.marks.warning.visible
 
 
 def test_marks_are_autosaved_and_restored(demo_case: dict[str, Path], tmp_path: Path) -> None:

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import os
 import signal
 import subprocess
 import sys
@@ -71,24 +70,50 @@ def test_a_damaged_autosave_does_not_stop_the_viewer_and_is_announced(
 
 
 def test_coronary3d_view_starts_with_a_deeply_nested_autosave(
-    demo_case: dict[str, Path], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+    demo_case: dict[str, Path], tmp_path: Path, monkeypatch: pytest.MonkeyPatch, start_view
 ) -> None:
     from viewer_app.state import default_autosave_path
 
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
-    env = {k: v for k, v in os.environ.items() if k != "CORONARY3D_DEBUG"}
     path = default_autosave_path(demo_case["a"], demo_case["b"])
     path.parent.mkdir(parents=True)
     path.write_text('{"viewer": ' + "[" * 100000 + "]" * 100000 + "}")
-    proc = subprocess.Popen([sys.executable, "-m", "recon.cli", "view", "--port", "0"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
-                            cwd=tmp_path)
-    try:
-        assert proc.stdout is not None
-        line = proc.stdout.readline()
-        assert "coronary3d viewer: http://127.0.0.1:" in line, proc.stderr.read()
-    finally:
-        proc.send_signal(signal.SIGTERM)
-        _, stderr = proc.communicate(timeout=30)
-    assert "Traceback" not in stderr
+    view = start_view(cache_dir=tmp_path / "cache")
+    assert view.url is not None, (view.line, view.stop())
+    assert "Traceback" not in view.stop()
     assert [p.name for p in path.parent.glob("*.damaged-*.json")]
+
+
+def test_a_tree_survives_load_save_autosave_and_a_restart(
+    demo_case: dict[str, Path], tmp_path: Path
+) -> None:
+    """Issue 15: the viewer saved a branch's marks without its parent and bifurcation."""
+    doc = json.loads(demo_case["seeds"].read_text())
+    bif = doc["features"][0]
+    doc["version"] = 2
+    doc["segments"].append({"name": "D1", "parent": doc["segments"][0]["name"],
+                            "bifurcation": bif["name"], "a": [bif["a"], [250.0, 330.0]],
+                            "b": [bif["b"], [300.0, 330.0]]})
+    seeds_path = tmp_path / "tree.json"
+    seeds_path.write_text(json.dumps(doc))
+    autosave = tmp_path / "auto.json"
+    links = [(s["name"], s.get("parent"), s.get("bifurcation")) for s in doc["segments"]]
+    app = ViewerApp(str(demo_case["a"]), str(demo_case["b"]), str(seeds_path),
+                    host="127.0.0.1", port=0, autosave_path=autosave, out_dir=tmp_path)
+    try:
+        saved = app.save_seeds(tmp_path / "saved.json")
+        assert [(s["name"], s.get("parent"), s.get("bifurcation"))
+                for s in json.loads(saved.read_text())["segments"]] == links
+        app.set_mode("feature")
+        app.click("a", 150.0, 160.0)  # a change: autosaved
+        assert [(s["name"], s.get("parent"), s.get("bifurcation"))
+                for s in json.loads(autosave.read_text())["segments"]] == links
+    finally:
+        app.stop()
+    app = ViewerApp(str(demo_case["a"]), str(demo_case["b"]), None, host="127.0.0.1",
+                    port=0, autosave_path=autosave)
+    try:
+        assert app.restored_autosave
+        assert [(s.name, s.parent, s.bifurcation) for s in app.seeds().segments] == links
+    finally:
+        app.stop()

@@ -10,6 +10,7 @@ Screenshots go to test-artifacts/viewer/. Needs /usr/bin/chromium and the
 from __future__ import annotations
 
 import json
+import re
 import shutil
 import time
 from pathlib import Path
@@ -119,7 +120,8 @@ class Browser:
 
     def shot(self, name: str) -> None:
         self.page.wait_for_timeout(400)
-        self.page.screenshot(path=str(self.out / name))
+        # a loaded machine renders WebGL slowly (30 s was once not enough for the fonts)
+        self.page.screenshot(path=str(self.out / name), timeout=120_000)
         self.shots.append(name)
 
     def screen_xy(self, view: str, col: float, row: float) -> tuple[float, float]:
@@ -148,6 +150,19 @@ class Browser:
         """Pick ``option`` in the dropdown labelled ``label`` (mouse clicks)."""
         self.page.get_by_label(label, exact=True).click()
         self.page.get_by_role("option", name=option, exact=True).click()
+
+    def text_field(self, label: str) -> object:
+        """The text input labelled ``label`` (viser's label is not linked to its input)."""
+        page = self.page
+        row = page.locator("div").filter(has=page.get_by_text(label, exact=True))
+        return row.filter(has=page.locator("input")).last.locator("input").first
+
+    def slider_thumb(self, label: str) -> object:
+        """The thumb of the slider labelled ``label``."""
+        page = self.page
+        row = page.locator("div").filter(has=page.get_by_text(label, exact=True))
+        return row.filter(has=page.locator(".mantine-Slider-thumb")).last.locator(
+            ".mantine-Slider-thumb").first
 
     def dropdown_value(self, label: str) -> str:
         return self.page.get_by_label(label, exact=True).input_value()
@@ -262,6 +277,15 @@ def test_a_new_pair_shows_no_old_marks(
             # live page keeps stale names in its lookup table, so reload to ask).
             b.reload()
             assert b.page.evaluate(MARK_LABELS_JS) == []
+            # Views too similar: the page says so as soon as the pair is open.
+            from recon.io.overrides import GeometryOverrides
+
+            ga = app.views["a"].angio.geometry
+            assert app.open_pair(str(pa), str(pb), overrides_b=GeometryOverrides(
+                alpha_deg=ga.alpha_deg + 10.0, beta_deg=ga.beta_deg))
+            warning = b.page.get_by_text("Views too similar").first
+            warning.wait_for(state="visible", timeout=10_000)
+            b.shot("new_pair_views_too_similar.png")
         finally:
             b.close()
             app.stop()
@@ -361,6 +385,29 @@ def test_guided_session_from_an_empty_page_to_a_mesh(
             b.shot("guided_9_after_reload.png")
             b.page.get_by_text("Lesion end (mm)").scroll_into_view_if_needed()
             b.shot("guided_10_results_panel.png")
+            # The sliders' end labels as the page prints them (the lesion sliders' read
+            # "91.722401", the window width's "32.99").
+            ends = b.page.locator(".mantine-Slider-markLabel").all_inner_texts()
+            assert ends and all(re.fullmatch(r"\d+(\.\d)?", e.strip()) for e in ends), ends
+
+            # The proximal reference site, dragged with the mouse: the measurements and
+            # the chart follow.
+            m = rec.measurements
+            thumb = b.slider_thumb("Proximal reference (mm)")
+            thumb.scroll_into_view_if_needed()
+            box = thumb.bounding_box()
+            b.page.mouse.move(box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
+            b.page.mouse.down()
+            b.page.mouse.move(box["x"] - 40, box["y"] + box["height"] / 2, steps=8)
+            b.page.mouse.up()
+            _wait(lambda: app.lesion is not None, 10, "the lesion to follow the slider")
+            site = app.lesion["proximal_reference_s_mm"]
+            assert site < m.lesion_start_s_mm - 2.0, (site, m.lesion_start_s_mm)
+            assert app.lesion["lesion_start_s_mm"] == pytest.approx(m.lesion_start_s_mm, abs=0.1)
+            assert f"(at {site:.1f} / " in app.panels.results.clinical.content
+            b.page.wait_for_timeout(800)
+            b.page.get_by_text("Distal reference (mm)").scroll_into_view_if_needed()
+            b.shot("guided_11_reference_moved.png")
 
             with b.page.expect_download(timeout=30_000) as info:
                 b.page.get_by_role("button", name="Download report.json").click()
@@ -407,3 +454,77 @@ def _screen_box(b: Browser, name: str) -> list[float]:
 
 def _failed(app: ViewerApp) -> bool:
     return any(level == "error" for level, _, _ in app.notifications)
+
+
+def _catheter_file(demo_a: Path, out: Path, row: float, cols: tuple[int, int],
+                   french: float) -> float:
+    """Demo view A with a straight contrast-filled catheter of ``french`` F along image
+    row ``row`` between columns ``cols`` (Beer-Lambert, blurred as the detector), written
+    as XA DICOM with the demo's header; returns its width in px (at the isocentre)."""
+    from scipy import ndimage as ndi
+
+    from recon.io import load_angiogram
+    from recon.io.dicom_write import write_xa_dicom
+
+    angio = load_angiogram(str(demo_a))
+    g = angio.geometry
+    width_px = french / 3.0 * g.sid_mm / g.sod_mm / g.pixel_spacing_mm[0]
+    rows, colgrid = np.mgrid[0:g.rows, 0:g.cols].astype(float)
+    chord = 2.0 * np.sqrt(np.clip((width_px / 2) ** 2 - (rows - row) ** 2, 0.0, None))
+    chord[(colgrid < cols[0]) | (colgrid > cols[1])] = 0.0
+    transmitted = ndi.gaussian_filter(np.exp(-0.09 * chord), 0.8)
+    image = np.clip(np.round(angio.image * transmitted), 0, 4095).astype(np.uint16)
+    write_xa_dicom(out, image, g, bits_stored=12)
+    return width_px
+
+
+@pytest.mark.skipif(not Path(CHROMIUM).is_file(), reason=f"no browser at {CHROMIUM}")
+def test_catheter_calibration_sets_the_pixel_spacing_from_two_clicks(
+    demo_case: dict[str, Path], tmp_path: Path, artifacts_dir: Path
+) -> None:
+    """Issue 16: two clicks across the guiding catheter and its French size set the pixel
+    spacing, in the Geometry folder, with real mouse events; the clicks are no marks."""
+    sync_api = pytest.importorskip("playwright.sync_api", reason="playwright is not installed")
+    path_a = tmp_path / "catheter_a.dcm"
+    row, french = 150.0, 6.0  # top right of A, clear of the notifications
+    width_px = _catheter_file(demo_case["a"], path_a, row, (330, 500), french)
+    app = ViewerApp(str(path_a), str(demo_case["b"]), None, port=0,
+                    autosave_path=tmp_path / "autosave.json")
+    app.wait_ready()
+    true_spacing = app.views["a"].angio.geometry.pixel_spacing_mm[0]
+    with sync_api.sync_playwright() as pw:
+        b = Browser(pw, tmp_path / "profile", artifacts_dir)
+        try:
+            b.open(app)
+            b.page.get_by_text("Geometry", exact=True).click()  # unfold the folder
+            field = b.text_field("Catheter size (F)")
+            field.fill(f"{french:g}")
+            field.press("Enter")
+            b.page.get_by_role("button", name="Measure catheter (click its 2 edges)").click()
+            _wait(lambda: app.catheter.active, 10, "the catheter measurement to start")
+            # One click near each edge, a pixel or so off, as a hand places them.
+            _, notes = b.click("a", 420.0, row - width_px / 2 - 1.0)
+            assert notes and notes[-1][1] == "Catheter", notes
+            _, notes = b.click("a", 421.0, row + width_px / 2 + 0.7)
+            assert app.state.marks == []  # catheter clicks are not marks
+            cal = app.catheter.result
+            assert cal is not None, notes
+            assert cal.width_px == pytest.approx(width_px, rel=0.05)
+            assert cal.pixel_spacing_mm == pytest.approx(true_spacing, rel=0.05)
+            typed = app.panels.geometry.fields["a"]["pixel_spacing_mm"].value
+            assert float(typed) == pytest.approx(cal.pixel_spacing_mm, abs=1e-4)
+            b.page.wait_for_timeout(600)
+            b.page.get_by_text("Catheter calibration").scroll_into_view_if_needed()
+            b.shot("catheter_1_measured.png")
+            # Opening with this geometry uses it; clicks are marks again.
+            b.page.get_by_role("button", name="Open with this geometry").click()
+            _wait(lambda: abs(app.views["a"].angio.geometry.pixel_spacing_mm[0]
+                              - float(typed)) < 1e-6, 30, "the pair to reopen")
+            b.settle()
+            mark, _ = b.click("a", 300.0, 300.0)
+            assert mark is not None and mark.view == "a"
+            assert app.panels.geometry.catheter_note.content == ""  # no stale figures
+            b.shot("catheter_2_reopened.png")
+        finally:
+            b.close()
+            app.stop()

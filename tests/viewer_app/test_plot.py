@@ -46,3 +46,33 @@ def test_chart_size_and_smoothed_curve() -> None:
     img = profile_plot(_rec(smooth=True), width=400, height=240)
     assert img.shape == (240, 400, 3) and img.dtype == np.uint8
     assert np.count_nonzero(np.all(img == CURVE, axis=-1)) > 300
+
+
+SITE = (90, 90, 90)  # the reference sites (dashed) and the straight reference
+AREA = (20, 140, 120)
+
+
+def test_reference_sites_are_drawn_where_the_clinician_put_them() -> None:
+    rec = _rec(smooth=True)
+    lesion = {"mld_mm": 1.5, "mld_s_mm": 25.0, "lesion_start_s_mm": 20.0,
+              "lesion_end_s_mm": 30.0, "proximal_reference_mm": 3.0,
+              "distal_reference_mm": 3.0, "proximal_reference_s_mm": 10.0,
+              "distal_reference_s_mm": 40.0}
+    img = profile_plot(rec, lesion=lesion)
+    left, right = 56, 14
+    for s_mm in (10.0, 40.0):
+        col = round(left + s_mm / 50.0 * (640 - left - right))
+        dashes = np.count_nonzero(np.all(img[:, col - 1:col + 2] == SITE, axis=-1))
+        assert dashes > 60, (s_mm, dashes)  # a dashed line down the chart
+    # nothing at a lesion end that is not a reference site
+    col = round(left + 20.0 / 50.0 * (640 - left - right))
+    assert np.count_nonzero(np.all(img[:, col - 1:col + 2] == SITE, axis=-1)) < 10
+
+
+def test_the_area_chart_is_drawn_below_when_the_profile_has_areas() -> None:
+    rec = _rec(smooth=True)
+    assert not np.any(np.all(profile_plot(rec) == AREA, axis=-1))
+    rec.profile.area_smooth_mm2 = np.pi * rec.profile.diameter_mm ** 2 / 4
+    img = profile_plot(rec, width=440, height=440)
+    rows = np.flatnonzero(np.any(np.all(img == AREA, axis=-1), axis=1))
+    assert rows.size and rows.min() > 0.6 * 440  # in the lower third

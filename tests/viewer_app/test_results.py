@@ -149,6 +149,15 @@ def test_lesion_ends_set_by_hand() -> None:
     assert v["reference_diameter_mm"] == pytest.approx(ref, abs=5e-3)
     assert v["diameter_stenosis_pct"] == pytest.approx(100 * 1.5 / ref, abs=0.5)
     assert lesion_measurements(prof, 35.0, 15.0) == v  # the ends in either order
+    assert (v["proximal_reference_s_mm"], v["distal_reference_s_mm"]) == (15.0, 35.0)
+    # Reference sites moved out of the lesion's shoulders: the reference at the MLD is
+    # read between them (2D QCA's user-defined reference), the MLD is not.
+    w = lesion_measurements(prof, 15.0, 35.0, (5.0, 45.0))
+    assert w["mld_mm"] == v["mld_mm"] and w["lesion_length_mm"] == 20.0
+    assert w["proximal_reference_mm"] == pytest.approx(3.0 - 0.1, abs=1e-3)
+    assert w["distal_reference_mm"] == pytest.approx(3.0 - 0.9, abs=1e-3)
+    assert w["reference_diameter_mm"] == pytest.approx(ref, abs=5e-3)
+    assert lesion_measurements(prof, 15.0, 35.0, (45.0, 5.0)) == w
 
 
 def test_diameter_colour_scale() -> None:

@@ -183,6 +183,49 @@ def test_seeds_round_trip_through_marks() -> None:
     assert st.segment_names == ["LAD", "LCx"]
 
 
+TREE = {  # docs/seeds-format.md's version-2 example
+    "version": 2,
+    "segments": [
+        {"name": "LAD", "a": [[170.5, 54.1], [179.9, 139.1], [323.0, 261.2]],
+         "b": [[368.6, 101.1], [371.2, 177.0], [401.9, 331.4]]},
+        {"name": "D1", "parent": "LAD", "bifurcation": "LAD/D1",
+         "a": [[192.1, 160.3], [240.7, 181.0]], "b": [[379.0, 196.7], [420.2, 230.5]]},
+    ],
+    "features": [{"name": "LAD/D1", "a": [192.1, 160.3], "b": [379.0, 196.7]}],
+}
+
+
+def test_a_tree_keeps_its_branches_through_load_save_and_autosave(tmp_path: Path) -> None:
+    """Issue 15: the viewer wrote a tree's branch as a root (parent and bifurcation lost)."""
+    seeds = seeds_from_dict(TREE)
+    st = _state()
+    st.load_seeds(seeds)
+    saved = st.to_seeds()
+    assert saved == seeds
+    assert [(s.parent, s.bifurcation) for s in saved.segments] == [(None, None),
+                                                                   ("LAD", "LAD/D1")]
+    assert saved.to_dict()["version"] == 2
+    store = Autosave(tmp_path / "auto.json", str(tmp_path / "a.dcm"), str(tmp_path / "b.dcm"))
+    store.save(st)
+    assert seeds_from_dict(json.loads(store.path.read_text())) == seeds
+    restored = _state()
+    assert store.load_into(restored, None)
+    assert restored.to_seeds() == seeds
+    # Marks added after the restart keep the tree; an incomplete parent leaves the branch a
+    # root in the seeds (a valid file) but the link waits in the state for the parent.
+    restored.set_mode("waypoint")
+    restored.click("a", 200.0, 170.0)
+    assert restored.to_seeds().segments[1].parent == "LAD"
+    restored.marks = [m for m in restored.marks if not (m.group == 0 and m.kind == "distal")]
+    assert [s.name for s in restored.to_seeds().segments] == ["D1"]
+    assert restored.to_seeds().segments[0].parent is None
+    assert restored.to_dict()["viewer"]["segment_links"] == {"D1": ["LAD", "LAD/D1"]}
+    restored.clear()
+    assert restored.to_dict()["viewer"]["segment_links"] == {}
+    assert restored.undo()
+    assert restored.to_dict()["viewer"]["segment_links"] == {"D1": ["LAD", "LAD/D1"]}
+
+
 def test_autosave_round_trip_keeps_incomplete_marks(tmp_path: Path) -> None:
     a, b = tmp_path / "a.dcm", tmp_path / "b.dcm"
     st = _state()

@@ -12,7 +12,7 @@ from recon.bench.common import pose_error
 from recon.synth import make_phantom
 
 BENCHES = ("centerline", "calibration", "matching", "reconstruct", "speed", "intervals",
-           "sections")
+           "sections", "optimal_view")
 
 
 #: Parameters after (cases, seed): the suite for the benches that take --suite varied,

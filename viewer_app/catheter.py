@@ -1,0 +1,116 @@
+"""Catheter calibration in the page (Geometry folder): French size, two clicks across the
+guiding catheter, and the pixel spacing field of that view filled (recon.catheter).
+
+While a measurement is pending the next two clicks on that view's image go here, not
+to the marks. The edges found are drawn on the image as two short yellow ticks.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from recon.catheter import FRENCH_RANGE, CatheterCalibration, calibrate_from_catheter
+from viewer_app.scene import OVERLAY_Z
+
+if TYPE_CHECKING:
+    from viewer_app.app import ViewerApp
+
+__all__ = ["CatheterTool"]
+
+EDGE_COLOR = (255, 210, 0)
+
+
+class CatheterTool:
+    """A pending catheter measurement of one view and the last result."""
+
+    def __init__(self, app: ViewerApp) -> None:
+        self.app = app
+        self.pending: tuple[str, float] | None = None  # (view, French size)
+        self.clicks: list[tuple[float, float]] = []
+        self.result: CatheterCalibration | None = None
+
+    @property
+    def active(self) -> bool:
+        return self.pending is not None
+
+    def start(self, view: str, french_text: str, client: object | None = None) -> bool:
+        """Wait for two clicks across the catheter in ``view`` ("a" or "b") of the given
+        French size (text from the page); False with an error notification if unusable."""
+        try:
+            french = float(str(french_text).strip().rstrip("Ff").strip())
+        except ValueError:
+            french = float("nan")
+        if not FRENCH_RANGE[0] <= french <= FRENCH_RANGE[1]:
+            self.app.notify("Catheter", f"catheter size {french_text!r}: give the French size, "
+                            f"{FRENCH_RANGE[0]:g}-{FRENCH_RANGE[1]:g} F", "error", client)
+            return False
+        self.pending, self.clicks = (view, french), []
+        self._note(f"Waiting: click once on each edge of the {french:g} F catheter in "
+                   f"**{view.upper()}**, across it.")
+        self.app.notify("Catheter", f"click once on each edge of the catheter in "
+                        f"{view.upper()}", "info", client)
+        return True
+
+    def click(self, view: str, col: float, row: float, client: object | None = None) -> None:
+        """One click of the pending measurement (a click in the other view is refused)."""
+        want = self.pending[0] if self.pending is not None else view
+        if view != want:
+            self.app.notify("Catheter", f"the catheter is measured in {want.upper()}: click "
+                            f"its edges there", "error", client)
+            return
+        self.clicks.append((float(col), float(row)))
+        if len(self.clicks) < 2:
+            self.app.notify("Catheter", "first edge placed; now the other edge", "info", client)
+            return
+        view, french = self.pending
+        self.pending = None
+        self.app.guard("Catheter", client, lambda: self._finish(view, french, client))
+
+    def _finish(self, view: str, french: float, client: object | None) -> None:
+        from recon.intensity import POWER_OF, resolve_mapping
+
+        app = self.app
+        angio = app.views[view].angio
+        fields = app.panels.geometry.fields[view]
+        sid = _number(fields["sid_mm"].value, angio.geometry.sid_mm)
+        sod = _number(fields["sod_mm"].value, angio.geometry.sod_mm)
+        mapping = resolve_mapping(angio.image, angio.info.get("pixel_intensity_relationship"),
+                                  app.intensity[view])
+        cal = calibrate_from_catheter(angio.image, *self.clicks, french=french, sid_mm=sid,
+                                      sod_mm=sod, power=POWER_OF[mapping.mapping])
+        self.result = cal
+        fields["pixel_spacing_mm"].value = f"{cal.pixel_spacing_mm:.4f}"
+        header = angio.geometry.pixel_spacing_mm[0]
+        self._note(
+            f"Catheter {french:g} F ({cal.diameter_mm:.2f} mm) in {view.upper()}: "
+            f"{cal.width_px:.2f} px wide (fitted), **{cal.mm_per_px_at_catheter:.4f} mm/px** "
+            f"at the catheter; detector pixel **{cal.pixel_spacing_mm:.4f} mm** (× SID "
+            f"{sid:.0f} / SOD {sod:.0f}: the catheter taken at the isocentre's depth; the "
+            f"file opened with {header:.4f} mm). A contrast-filled catheter with a faint wall "
+            "reads near its inner diameter (spacing up to ~10 % large). Press **Open with "
+            "this geometry** to use it.")
+        scene = app.server.scene
+        v = app.views[view]
+        # each edge as a tick along the catheter, 1.5 widths long, so both are seen
+        e0, e1 = cal.edges_px
+        along = np.array([-(e1 - e0)[1], (e1 - e0)[0]]) * 0.75
+        ticks = np.array([[e - along, e + along] for e in (e0, e1)])
+        seg = v.local_from_px(ticks.reshape(-1, 2), z=1.5 * OVERLAY_Z).reshape(2, 2, 3).astype(
+            np.float32)
+        scene.add_line_segments(f"/over_{view}/catheter", seg, EDGE_COLOR, thickness=3.0,
+                                thickness_units="screen")
+        app.notify("Catheter", f"pixel spacing {view.upper()} {cal.pixel_spacing_mm:.4f} mm "
+                   "(in the Geometry folder)", "success", client)
+
+    def _note(self, text: str) -> None:
+        self.app.panels.geometry.catheter_note.content = text
+
+
+def _number(text: str, fallback: float) -> float:
+    """A typed number, or the fallback when the field is empty or not a number."""
+    try:
+        return float(str(text).strip())
+    except ValueError:
+        return float(fallback)
