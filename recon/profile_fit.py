@@ -85,6 +85,35 @@ def _sample_step_for(half_width_px: float) -> float:
     return max(0.5, float(half_width_px) / 30.0)
 
 
+def _offsets_for(half_width_px: float) -> FloatArray:
+    """Sample offsets (L,) px across the vessel of a window of that half-width."""
+    step = _sample_step_for(half_width_px)
+    n_half = int(round(half_width_px / step))
+    return np.arange(-n_half, n_half + 1) * step
+
+
+@lru_cache(maxsize=32)
+def _chords(r_max: float, r_step: float) -> tuple[FloatArray, FloatArray, FloatArray, float]:
+    """The table's radii (R,), a fine grid of offsets x (F,) px, the chords
+    2 sqrt(r^2 - x^2) (R, F) on it, and the grid's step (px)."""
+    radii = np.arange(_R_MIN_PX, r_max + 0.5 * r_step, r_step)
+    fine_step = 0.02 * max(1.0, r_max / 10.0)
+    fine = np.arange(-r_max - 0.5, r_max + 0.5 + fine_step, fine_step)
+    chord = 2.0 * np.sqrt(np.clip(radii[:, None] ** 2 - fine[None, :] ** 2, 0.0, None))
+    return radii, fine, chord, fine_step
+
+
+@lru_cache(maxsize=256)
+def _template(half_width_px: float, sigma_px: float, r_max: float,
+              r_step: float) -> FloatArray:
+    """Chords of :func:`_chords` convolved with a Gaussian of ``sigma_px`` (floored at
+    half the fine step) and sampled at the window's offsets: (R, L), by quadrature
+    (one matrix product)."""
+    _, fine, chord, fine_step = _chords(r_max, r_step)
+    return _blurred(chord, fine, _offsets_for(half_width_px),
+                    max(sigma_px, 0.5 * fine_step), fine_step)
+
+
 @lru_cache(maxsize=64)
 def profile_table(
     half_width_px: float, blur_px: float, r_max: float, r_step: float,
@@ -102,19 +131,14 @@ def profile_table(
     design_flat : (L, 3R) the design matrices D_r side by side.
     pinv_flat : (L, 3R) the pseudo-inverses (D_r^T D_r)^-1 D_r^T, transposed, side by side.
     """
-    step = _sample_step_for(half_width_px)
-    n_half = int(round(half_width_px / step))
-    offsets = np.arange(-n_half, n_half + 1) * step
-    radii = np.arange(_R_MIN_PX, r_max + 0.5 * r_step, r_step)
-    # Template (R, L): the chord 2 sqrt(r^2 - x^2) convolved with the Gaussian blur,
-    # by quadrature on a fine grid (one matrix product).
-    fine_step = 0.02 * max(1.0, r_max / 10.0)
-    fine = np.arange(-r_max - 0.5, r_max + 0.5 + fine_step, fine_step)
-    chord = 2.0 * np.sqrt(np.clip(radii[:, None] ** 2 - fine[None, :] ** 2, 0.0, None))
-    template = _blurred(chord, fine, offsets, max(blur_px, 0.5 * fine_step), fine_step)
+    offsets = _offsets_for(half_width_px)
+    radii = _chords(r_max, r_step)[0]
+    # Template (R, L): the chord convolved with the Gaussian blur (cached per blur, so
+    # an enhancement grid at one blur convolves each chord once per mask sigma).
+    template = _template(half_width_px, blur_px, r_max, r_step)
     gain, sigma_e = enhance
     if gain > 0:
-        wide = _blurred(chord, fine, offsets, float(np.hypot(blur_px, sigma_e)), fine_step)
+        wide = _template(half_width_px, float(np.hypot(blur_px, sigma_e)), r_max, r_step)
         template = (1.0 + gain) * template - gain * wide
     design = np.stack(
         [np.ones_like(template), np.broadcast_to(offsets, template.shape), template], axis=1
@@ -144,6 +168,17 @@ def _gaussian_weights(fine: FloatArray, offsets: FloatArray, sigma_px: float,
 
 
 @lru_cache(maxsize=64)
+def _chord_variance(half_width_px: float, blur_px: float, r_max: float,
+                    r_step: float) -> FloatArray:
+    """V = G * C^2 - (G * C)^2 (R, L) of :func:`_blur_variance_table` (no enhancement in it)."""
+    _, fine, chord, fine_step = _chords(r_max, r_step)
+    kernel = _gaussian_weights(fine, _offsets_for(half_width_px),
+                               max(blur_px, 0.5 * fine_step), fine_step)
+    mean = chord @ kernel
+    return np.maximum((chord**2) @ kernel - mean**2, 0.0)
+
+
+@lru_cache(maxsize=64)
 def _blur_variance_table(
     half_width_px: float, blur_px: float, r_max: float, r_step: float,
     enhance: tuple[float, float] = (0.0, 0.0),
@@ -157,14 +192,9 @@ def _blur_variance_table(
     Returns V (R, L), D_r^T V_r (R, 3), the least-squares coefficients of V_r
     (R, 3) and |V_r|^2 (R,), for the table of :func:`profile_table`.
     """
-    offsets, radii, design_flat, pinv_flat = profile_table(half_width_px, blur_px, r_max,
-                                                           r_step, enhance)
-    fine_step = 0.02 * max(1.0, r_max / 10.0)
-    fine = np.arange(-r_max - 0.5, r_max + 0.5 + fine_step, fine_step)
-    chord = 2.0 * np.sqrt(np.clip(radii[:, None] ** 2 - fine[None, :] ** 2, 0.0, None))
-    kernel = _gaussian_weights(fine, offsets, max(blur_px, 0.5 * fine_step), fine_step)
-    mean = chord @ kernel
-    var = np.maximum((chord**2) @ kernel - mean**2, 0.0)  # (R, L)
+    _, radii, design_flat, pinv_flat = profile_table(half_width_px, blur_px, r_max, r_step,
+                                                     enhance)
+    var = _chord_variance(half_width_px, blur_px, r_max, r_step)
     n_r = len(radii)
     design = design_flat.T.reshape(n_r, 3, -1)
     pinv = pinv_flat.T.reshape(n_r, 3, -1)
