@@ -38,6 +38,8 @@ __all__ = [
     "fit_profiles",
     "fit_along",
     "sample_profiles",
+    "sample_along",
+    "SampledProfiles",
     "spline_coefficients",
     "half_width_for",
     "max_shift_for",
@@ -305,6 +307,45 @@ class ProfileFit:
     depth: FloatArray
 
 
+@dataclass(frozen=True)
+class SampledProfiles:
+    """Profiles sampled once at N points for repeated :func:`fit_along` calls there (a
+    grid of model parameters: power, blur, enhancement), before any ``transform``.
+
+    n_points : N.
+    search_shift : whether the samples cover the shift search.
+    groups : per half-width class: (half-width px, indices (S,) of its points, shifts
+        (K,) px, offsets (L,) px, samples (S * K, L)).
+    """
+
+    n_points: int
+    search_shift: bool
+    groups: tuple[tuple[float, NDArray[np.intp], FloatArray, FloatArray, FloatArray], ...]
+
+
+def sample_along(
+    absorb: FloatArray, points_px: FloatArray, normals: FloatArray,
+    radius_guess_px: FloatArray, *, search_shift: bool = True, order: int = 1,
+) -> SampledProfiles:
+    """The profiles :func:`fit_along` fits (same parameters), sampled once."""
+    half = np.array([half_width_for(r) for r in radius_guess_px])
+    groups = []
+    for hw in np.unique(half):
+        sel = np.nonzero(half == hw)[0]
+        if search_shift:
+            m_shift = max_shift_for(hw)
+            shifts = np.arange(-m_shift, m_shift + 1e-4, max(0.5, m_shift / 4.0))
+        else:
+            shifts = np.array([0.0])
+        offsets = _offsets_for(float(hw))
+        all_offsets = (shifts[:, None] + offsets[None, :]).ravel()
+        prof = sample_profiles(absorb, points_px[sel], normals[sel], all_offsets, order)
+        groups.append((float(hw), sel, shifts, offsets,
+                       prof.reshape(len(sel) * len(shifts), len(offsets))))
+    return SampledProfiles(n_points=len(points_px), search_shift=search_shift,
+                           groups=tuple(groups))
+
+
 def fit_along(
     absorb: FloatArray,
     points_px: FloatArray,
@@ -318,6 +359,7 @@ def fit_along(
     order: int = 1,
     natural_scale: float | None = 1.0,
     enhance: tuple[float, float] = (0.0, 0.0),
+    samples: SampledProfiles | None = None,
 ) -> ProfileFit:
     """Fit the cylinder model at every point, over shifts along the normal.
 
@@ -335,6 +377,8 @@ def fit_along(
     natural_scale : natural absorption units per unit of the (transformed) samples,
         for the second-order blur term (None: first-order model only).
     enhance : (gain, sigma px) of the image's edge enhancement (:func:`profile_table`).
+    samples : the profiles of :func:`sample_along` with these points, normals,
+        radius guesses, ``search_shift`` and ``order`` (``absorb`` is not sampled again).
 
     Returns
     -------
@@ -348,20 +392,15 @@ def fit_along(
     frac_out = np.full(n, np.inf)
     depth_out = np.zeros(n)
     limit = np.zeros(n)
-    half = np.array([half_width_for(r) for r in radius_guess_px])
-    for hw in np.unique(half):
-        sel = np.nonzero(half == hw)[0]
+    if samples is None:
+        samples = sample_along(absorb, points_px, normals, radius_guess_px,
+                               search_shift=search_shift, order=order)
+    elif samples.n_points != n or samples.search_shift != search_shift:
+        raise ValueError(f"samples of {samples.n_points} points (search_shift "
+                         f"{samples.search_shift}) for {n} points (search_shift {search_shift})")
+    for hw, sel, shifts, offsets, prof in samples.groups:
         m_shift = max_shift_for(hw)
-        if search_shift:
-            s_step = max(0.5, m_shift / 4.0)
-            shifts = np.arange(-m_shift, m_shift + 1e-4, s_step)
-        else:
-            shifts = np.array([0.0])
         step_r = max(r_step, hw / 100.0)
-        offsets = profile_table(hw, blur_px, hw - 1.0, step_r, enhance)[0]
-        all_offsets = (shifts[:, None] + offsets[None, :]).ravel()
-        prof = sample_profiles(absorb, points_px[sel], normals[sel], all_offsets, order)
-        prof = prof.reshape(len(sel) * len(shifts), len(offsets))
         if transform is not None:
             prof = transform(prof)
         rss, rad, dep, tot = fit_profiles(prof, hw, blur_px, hw - 1.0, step_r, natural_scale,
