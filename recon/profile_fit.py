@@ -235,19 +235,24 @@ def fit_profiles(
     coef = (profiles @ pinv_flat).reshape(m_prof, -1, 3)  # (M, R, 3)  least-squares c0, c1, b
     # RSS = |p|^2 - p^T D_r (D_r^T D_r)^-1 D_r^T p
     sq = np.einsum("ml,ml->m", profiles, profiles)
-    rss = sq[:, None] - np.einsum("mrk,mrk->mr", u, coef)
-    if natural_scale is not None:
+    projected = np.einsum("mrk,mrk->mr", u, coef)
+    depth_r = coef[:, :, 2]  # (M, R)
+    if natural_scale is None:
+        rss = sq[:, None] - projected
+    else:
         var, d_var, p_var, var_sq = _blur_variance_table(half_width_px, blur_px, r_max, r_step,
                                                          enhance)
         p_dot_var = profiles @ var.T  # (M, R)
-        u0, coef0 = u, coef
-        # p' = p + alpha V_r, alpha = k b^2 / 2 from the first-order fit
-        alpha = 0.5 * natural_scale * np.clip(coef[:, :, 2], 0.0, None) ** 2
-        u = u0 + alpha[:, :, None] * d_var[None]
-        coef = coef0 + alpha[:, :, None] * p_var[None]
-        sq_c = sq[:, None] + 2.0 * alpha * p_dot_var + alpha**2 * var_sq[None]
-        rss = sq_c - np.einsum("mrk,mrk->mr", u, coef)
-    rss = np.where(coef[:, :, 2] > 0, rss, np.inf)
+        # p' = p + alpha V_r, alpha = k b^2 / 2 from the first-order fit: D^T p' = u + alpha
+        # d_var, coefficients coef + alpha p_var, so p'^T D (D^T D)^-1 D^T p' expands as
+        # u.coef + alpha (u.p_var + d_var.coef) + alpha^2 d_var.p_var (no (M, R, 3) temporaries)
+        alpha = 0.5 * natural_scale * np.clip(depth_r, 0.0, None) ** 2
+        cross = np.einsum("mrk,rk->mr", u, p_var) + np.einsum("mrk,rk->mr", coef, d_var)
+        alpha_sq = alpha * alpha
+        sq_c = sq[:, None] + 2.0 * alpha * p_dot_var + alpha_sq * var_sq[None]
+        rss = sq_c - (projected + alpha * cross + alpha_sq * np.einsum("rk,rk->r", d_var, p_var))
+        depth_r = depth_r + alpha * p_var[None, :, 2]
+    rss = np.where(depth_r > 0, rss, np.inf)
     best = np.argmin(rss, axis=1)
     m = np.arange(m_prof)
     i = np.clip(best, 1, len(radii) - 2)
@@ -261,7 +266,7 @@ def fit_profiles(
         at_vertex = f1 - 0.5 * delta * (f0 - f2) * 0.5
     rss_best = np.where((best == i) & np.isfinite(at_vertex), at_vertex, rss[m, best])
     total = sq - profiles.sum(axis=1) ** 2 / profiles.shape[1]
-    return np.maximum(rss_best, 0.0), radius, coef[m, best, 2], np.maximum(total, 1e-300)
+    return np.maximum(rss_best, 0.0), radius, depth_r[m, best], np.maximum(total, 1e-300)
 
 
 def spline_coefficients(image: FloatArray) -> FloatArray:
