@@ -49,6 +49,7 @@ from recon.profile_fit import (
     MIN_MAX_SHIFT_PX,
     fit_along,
     half_width_for,
+    sample_along,
     sample_profiles,
     spline_coefficients,
 )
@@ -293,6 +294,8 @@ def _power_rss(raw_coef: FloatArray, points_px: FloatArray, normals: FloatArray,
     (``raw_coef``: its cubic spline coefficients; inf where nothing fitted)."""
     reach = np.linspace(-1.0, 1.0, 41) * half_width_for(float(np.median(radius_px)))
     g = geometric_mean(sample_profiles(raw_coef, points_px, normals, reach, 3), scale)
+    samples = sample_along(raw_coef, points_px, normals, radius_px, search_shift=search_shift,
+                           order=3)  # the same profiles for every key: sampled once
 
     def rss(key: tuple[float, ...]) -> FloatArray:
         power, blur_px, gain, sigma_px = (tuple(key) + (0.0, 0.0))[:4]
@@ -300,7 +303,7 @@ def _power_rss(raw_coef: FloatArray, points_px: FloatArray, normals: FloatArray,
                         search_shift=search_shift, order=3,
                         natural_scale=g ** (power - 1.0) * _natural_scale(power, scale, log_gain),
                         transform=lambda p: normalised_absorption(p, power, scale, g),
-                        enhance=(gain, sigma_px))
+                        enhance=(gain, sigma_px), samples=samples)
         return np.where(fit.ok, fit.rss, np.inf)
 
     return rss

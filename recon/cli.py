@@ -18,6 +18,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from recon.errors import CoronaryError
+from recon.startup import cap_math_threads
 
 EXIT_USER_ERROR = 2
 _REAL_PROCESS = False  # main() runs as the process itself (not called in-process by a test)
@@ -653,6 +654,8 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     global _REAL_PROCESS
     _REAL_PROCESS = argv is None  # the console script and `python -m recon.cli`
+    if _REAL_PROCESS:
+        cap_math_threads()  # before numpy loads (recon.startup)
 
     args = build_parser().parse_args(argv)
     handlers = {sig: signal.getsignal(sig) for sig in (signal.SIGTERM, signal.SIGINT)}

@@ -38,6 +38,8 @@ __all__ = [
     "fit_profiles",
     "fit_along",
     "sample_profiles",
+    "sample_along",
+    "SampledProfiles",
     "spline_coefficients",
     "half_width_for",
     "max_shift_for",
@@ -60,10 +62,10 @@ MIN_MAX_SHIFT_PX = 2.0
 def parabola_vertex_offset(f0: NDArray, f1: NDArray, f2: NDArray) -> NDArray:
     """Offset in [-0.5, 0.5] samples of the vertex of the parabola through three
     equally spaced values around a discrete minimum (0 where it is not convex)."""
-    with np.errstate(invalid="ignore", divide="ignore"):
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
         denom = f0 - 2.0 * f1 + f2
         delta = np.where(np.isfinite(denom) & (denom > 0), 0.5 * (f0 - f2) / denom, 0.0)
-    return np.clip(np.nan_to_num(delta), -0.5, 0.5)
+        return np.minimum(np.maximum(delta, -0.5), 0.5)  # never NaN: finite / positive
 
 
 def half_width_for(radius_px: float) -> float:
@@ -85,6 +87,35 @@ def _sample_step_for(half_width_px: float) -> float:
     return max(0.5, float(half_width_px) / 30.0)
 
 
+def _offsets_for(half_width_px: float) -> FloatArray:
+    """Sample offsets (L,) px across the vessel of a window of that half-width."""
+    step = _sample_step_for(half_width_px)
+    n_half = int(round(half_width_px / step))
+    return np.arange(-n_half, n_half + 1) * step
+
+
+@lru_cache(maxsize=32)
+def _chords(r_max: float, r_step: float) -> tuple[FloatArray, FloatArray, FloatArray, float]:
+    """The table's radii (R,), a fine grid of offsets x (F,) px, the chords
+    2 sqrt(r^2 - x^2) (R, F) on it, and the grid's step (px)."""
+    radii = np.arange(_R_MIN_PX, r_max + 0.5 * r_step, r_step)
+    fine_step = 0.02 * max(1.0, r_max / 10.0)
+    fine = np.arange(-r_max - 0.5, r_max + 0.5 + fine_step, fine_step)
+    chord = 2.0 * np.sqrt(np.clip(radii[:, None] ** 2 - fine[None, :] ** 2, 0.0, None))
+    return radii, fine, chord, fine_step
+
+
+@lru_cache(maxsize=256)
+def _template(half_width_px: float, sigma_px: float, r_max: float,
+              r_step: float) -> FloatArray:
+    """Chords of :func:`_chords` convolved with a Gaussian of ``sigma_px`` (floored at
+    half the fine step) and sampled at the window's offsets: (R, L), by quadrature
+    (one matrix product)."""
+    _, fine, chord, fine_step = _chords(r_max, r_step)
+    return _blurred(chord, fine, _offsets_for(half_width_px),
+                    max(sigma_px, 0.5 * fine_step), fine_step)
+
+
 @lru_cache(maxsize=64)
 def profile_table(
     half_width_px: float, blur_px: float, r_max: float, r_step: float,
@@ -102,19 +133,14 @@ def profile_table(
     design_flat : (L, 3R) the design matrices D_r side by side.
     pinv_flat : (L, 3R) the pseudo-inverses (D_r^T D_r)^-1 D_r^T, transposed, side by side.
     """
-    step = _sample_step_for(half_width_px)
-    n_half = int(round(half_width_px / step))
-    offsets = np.arange(-n_half, n_half + 1) * step
-    radii = np.arange(_R_MIN_PX, r_max + 0.5 * r_step, r_step)
-    # Template (R, L): the chord 2 sqrt(r^2 - x^2) convolved with the Gaussian blur,
-    # by quadrature on a fine grid (one matrix product).
-    fine_step = 0.02 * max(1.0, r_max / 10.0)
-    fine = np.arange(-r_max - 0.5, r_max + 0.5 + fine_step, fine_step)
-    chord = 2.0 * np.sqrt(np.clip(radii[:, None] ** 2 - fine[None, :] ** 2, 0.0, None))
-    template = _blurred(chord, fine, offsets, max(blur_px, 0.5 * fine_step), fine_step)
+    offsets = _offsets_for(half_width_px)
+    radii = _chords(r_max, r_step)[0]
+    # Template (R, L): the chord convolved with the Gaussian blur (cached per blur, so
+    # an enhancement grid at one blur convolves each chord once per mask sigma).
+    template = _template(half_width_px, blur_px, r_max, r_step)
     gain, sigma_e = enhance
     if gain > 0:
-        wide = _blurred(chord, fine, offsets, float(np.hypot(blur_px, sigma_e)), fine_step)
+        wide = _template(half_width_px, float(np.hypot(blur_px, sigma_e)), r_max, r_step)
         template = (1.0 + gain) * template - gain * wide
     design = np.stack(
         [np.ones_like(template), np.broadcast_to(offsets, template.shape), template], axis=1
@@ -144,6 +170,17 @@ def _gaussian_weights(fine: FloatArray, offsets: FloatArray, sigma_px: float,
 
 
 @lru_cache(maxsize=64)
+def _chord_variance(half_width_px: float, blur_px: float, r_max: float,
+                    r_step: float) -> FloatArray:
+    """V = G * C^2 - (G * C)^2 (R, L) of :func:`_blur_variance_table` (no enhancement in it)."""
+    _, fine, chord, fine_step = _chords(r_max, r_step)
+    kernel = _gaussian_weights(fine, _offsets_for(half_width_px),
+                               max(blur_px, 0.5 * fine_step), fine_step)
+    mean = chord @ kernel
+    return np.maximum((chord**2) @ kernel - mean**2, 0.0)
+
+
+@lru_cache(maxsize=64)
 def _blur_variance_table(
     half_width_px: float, blur_px: float, r_max: float, r_step: float,
     enhance: tuple[float, float] = (0.0, 0.0),
@@ -157,14 +194,9 @@ def _blur_variance_table(
     Returns V (R, L), D_r^T V_r (R, 3), the least-squares coefficients of V_r
     (R, 3) and |V_r|^2 (R,), for the table of :func:`profile_table`.
     """
-    offsets, radii, design_flat, pinv_flat = profile_table(half_width_px, blur_px, r_max,
-                                                           r_step, enhance)
-    fine_step = 0.02 * max(1.0, r_max / 10.0)
-    fine = np.arange(-r_max - 0.5, r_max + 0.5 + fine_step, fine_step)
-    chord = 2.0 * np.sqrt(np.clip(radii[:, None] ** 2 - fine[None, :] ** 2, 0.0, None))
-    kernel = _gaussian_weights(fine, offsets, max(blur_px, 0.5 * fine_step), fine_step)
-    mean = chord @ kernel
-    var = np.maximum((chord**2) @ kernel - mean**2, 0.0)  # (R, L)
+    _, radii, design_flat, pinv_flat = profile_table(half_width_px, blur_px, r_max, r_step,
+                                                     enhance)
+    var = _chord_variance(half_width_px, blur_px, r_max, r_step)
     n_r = len(radii)
     design = design_flat.T.reshape(n_r, 3, -1)
     pinv = pinv_flat.T.reshape(n_r, 3, -1)
@@ -203,19 +235,24 @@ def fit_profiles(
     coef = (profiles @ pinv_flat).reshape(m_prof, -1, 3)  # (M, R, 3)  least-squares c0, c1, b
     # RSS = |p|^2 - p^T D_r (D_r^T D_r)^-1 D_r^T p
     sq = np.einsum("ml,ml->m", profiles, profiles)
-    rss = sq[:, None] - np.einsum("mrk,mrk->mr", u, coef)
-    if natural_scale is not None:
+    projected = np.einsum("mrk,mrk->mr", u, coef)
+    depth_r = coef[:, :, 2]  # (M, R)
+    if natural_scale is None:
+        rss = sq[:, None] - projected
+    else:
         var, d_var, p_var, var_sq = _blur_variance_table(half_width_px, blur_px, r_max, r_step,
                                                          enhance)
         p_dot_var = profiles @ var.T  # (M, R)
-        u0, coef0 = u, coef
-        # p' = p + alpha V_r, alpha = k b^2 / 2 from the first-order fit
-        alpha = 0.5 * natural_scale * np.clip(coef[:, :, 2], 0.0, None) ** 2
-        u = u0 + alpha[:, :, None] * d_var[None]
-        coef = coef0 + alpha[:, :, None] * p_var[None]
-        sq_c = sq[:, None] + 2.0 * alpha * p_dot_var + alpha**2 * var_sq[None]
-        rss = sq_c - np.einsum("mrk,mrk->mr", u, coef)
-    rss = np.where(coef[:, :, 2] > 0, rss, np.inf)
+        # p' = p + alpha V_r, alpha = k b^2 / 2 from the first-order fit: D^T p' = u + alpha
+        # d_var, coefficients coef + alpha p_var, so p'^T D (D^T D)^-1 D^T p' expands as
+        # u.coef + alpha (u.p_var + d_var.coef) + alpha^2 d_var.p_var (no (M, R, 3) temporaries)
+        alpha = 0.5 * natural_scale * np.clip(depth_r, 0.0, None) ** 2
+        cross = np.einsum("mrk,rk->mr", u, p_var) + np.einsum("mrk,rk->mr", coef, d_var)
+        alpha_sq = alpha * alpha
+        sq_c = sq[:, None] + 2.0 * alpha * p_dot_var + alpha_sq * var_sq[None]
+        rss = sq_c - (projected + alpha * cross + alpha_sq * np.einsum("rk,rk->r", d_var, p_var))
+        depth_r = depth_r + alpha * p_var[None, :, 2]
+    rss = np.where(depth_r > 0, rss, np.inf)
     best = np.argmin(rss, axis=1)
     m = np.arange(m_prof)
     i = np.clip(best, 1, len(radii) - 2)
@@ -229,7 +266,7 @@ def fit_profiles(
         at_vertex = f1 - 0.5 * delta * (f0 - f2) * 0.5
     rss_best = np.where((best == i) & np.isfinite(at_vertex), at_vertex, rss[m, best])
     total = sq - profiles.sum(axis=1) ** 2 / profiles.shape[1]
-    return np.maximum(rss_best, 0.0), radius, coef[m, best, 2], np.maximum(total, 1e-300)
+    return np.maximum(rss_best, 0.0), radius, depth_r[m, best], np.maximum(total, 1e-300)
 
 
 def spline_coefficients(image: FloatArray) -> FloatArray:
@@ -275,6 +312,45 @@ class ProfileFit:
     depth: FloatArray
 
 
+@dataclass(frozen=True)
+class SampledProfiles:
+    """Profiles sampled once at N points for repeated :func:`fit_along` calls there (a
+    grid of model parameters: power, blur, enhancement), before any ``transform``.
+
+    n_points : N.
+    search_shift : whether the samples cover the shift search.
+    groups : per half-width class: (half-width px, indices (S,) of its points, shifts
+        (K,) px, offsets (L,) px, samples (S * K, L)).
+    """
+
+    n_points: int
+    search_shift: bool
+    groups: tuple[tuple[float, NDArray[np.intp], FloatArray, FloatArray, FloatArray], ...]
+
+
+def sample_along(
+    absorb: FloatArray, points_px: FloatArray, normals: FloatArray,
+    radius_guess_px: FloatArray, *, search_shift: bool = True, order: int = 1,
+) -> SampledProfiles:
+    """The profiles :func:`fit_along` fits (same parameters), sampled once."""
+    half = np.array([half_width_for(r) for r in radius_guess_px])
+    groups = []
+    for hw in np.unique(half):
+        sel = np.nonzero(half == hw)[0]
+        if search_shift:
+            m_shift = max_shift_for(hw)
+            shifts = np.arange(-m_shift, m_shift + 1e-4, max(0.5, m_shift / 4.0))
+        else:
+            shifts = np.array([0.0])
+        offsets = _offsets_for(float(hw))
+        all_offsets = (shifts[:, None] + offsets[None, :]).ravel()
+        prof = sample_profiles(absorb, points_px[sel], normals[sel], all_offsets, order)
+        groups.append((float(hw), sel, shifts, offsets,
+                       prof.reshape(len(sel) * len(shifts), len(offsets))))
+    return SampledProfiles(n_points=len(points_px), search_shift=search_shift,
+                           groups=tuple(groups))
+
+
 def fit_along(
     absorb: FloatArray,
     points_px: FloatArray,
@@ -288,6 +364,7 @@ def fit_along(
     order: int = 1,
     natural_scale: float | None = 1.0,
     enhance: tuple[float, float] = (0.0, 0.0),
+    samples: SampledProfiles | None = None,
 ) -> ProfileFit:
     """Fit the cylinder model at every point, over shifts along the normal.
 
@@ -305,6 +382,8 @@ def fit_along(
     natural_scale : natural absorption units per unit of the (transformed) samples,
         for the second-order blur term (None: first-order model only).
     enhance : (gain, sigma px) of the image's edge enhancement (:func:`profile_table`).
+    samples : the profiles of :func:`sample_along` with these points, normals,
+        radius guesses, ``search_shift`` and ``order`` (``absorb`` is not sampled again).
 
     Returns
     -------
@@ -318,20 +397,15 @@ def fit_along(
     frac_out = np.full(n, np.inf)
     depth_out = np.zeros(n)
     limit = np.zeros(n)
-    half = np.array([half_width_for(r) for r in radius_guess_px])
-    for hw in np.unique(half):
-        sel = np.nonzero(half == hw)[0]
+    if samples is None:
+        samples = sample_along(absorb, points_px, normals, radius_guess_px,
+                               search_shift=search_shift, order=order)
+    elif samples.n_points != n or samples.search_shift != search_shift:
+        raise ValueError(f"samples of {samples.n_points} points (search_shift "
+                         f"{samples.search_shift}) for {n} points (search_shift {search_shift})")
+    for hw, sel, shifts, offsets, prof in samples.groups:
         m_shift = max_shift_for(hw)
-        if search_shift:
-            s_step = max(0.5, m_shift / 4.0)
-            shifts = np.arange(-m_shift, m_shift + 1e-4, s_step)
-        else:
-            shifts = np.array([0.0])
         step_r = max(r_step, hw / 100.0)
-        offsets = profile_table(hw, blur_px, hw - 1.0, step_r, enhance)[0]
-        all_offsets = (shifts[:, None] + offsets[None, :]).ravel()
-        prof = sample_profiles(absorb, points_px[sel], normals[sel], all_offsets, order)
-        prof = prof.reshape(len(sel) * len(shifts), len(offsets))
         if transform is not None:
             prof = transform(prof)
         rss, rad, dep, tot = fit_profiles(prof, hw, blur_px, hw - 1.0, step_r, natural_scale,

@@ -42,6 +42,7 @@ __all__ = [
     "default_voxel_mm",
     "TreeSurface",
     "build_tree_surface",
+    "signed_volume",
 ]
 
 
@@ -487,9 +488,18 @@ def _repair(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
         trimesh.repair.fill_holes(mesh)
     if not mesh.is_winding_consistent:
         trimesh.repair.fix_winding(mesh)
-    if mesh.volume < 0:
+    if signed_volume(mesh.vertices, mesh.faces) < 0:
         mesh.invert()
     return mesh
+
+
+def signed_volume(vertices: FloatArray, faces: NDArray[np.int64]) -> float:
+    """Volume enclosed by a closed triangle mesh, vertices (V, 3), faces (F, 3): the sum
+    of the signed tetrahedra (origin, v0, v1, v2), v0 . (v1 x v2) / 6 (the divergence
+    theorem); negative when the faces wind inwards. (trimesh's ``volume`` integrates
+    the whole inertia tensor to get the same number.)"""
+    v0, v1, v2 = (vertices[faces[:, k]] for k in range(3))
+    return float(np.einsum("ij,ij->", v0, np.cross(v1, v2)) / 6.0)
 
 
 def build_surface(

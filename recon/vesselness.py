@@ -258,9 +258,10 @@ def _ridge_terms(level: F32, sigma_level_px: float, residual_px: float) -> tuple
     dark_blob = np.where(pos, np.clip(l1 / l2_safe, 0.0, 1.0), 0.0)  # 1: l1 = l2 > 0
     s_norm = np.sqrt(l1 * l1 + l2 * l2)
     # tangent = across + 90 deg: 2*theta = 2*alpha + 180 deg.
-    return (blob.astype(np.float32), edge.astype(np.float32), dark_blob.astype(np.float32),
-            s_norm.astype(np.float32),
-            (-cos2a).astype(np.float32), (-sin2a).astype(np.float32))
+    f32 = np.float32
+    return (blob.astype(f32, copy=False), edge.astype(f32, copy=False),
+            dark_blob.astype(f32, copy=False), s_norm.astype(f32, copy=False),
+            (-cos2a).astype(f32, copy=False), (-sin2a).astype(f32, copy=False))
 
 
 def _upsample2(arr: F32, shape: tuple[int, int]) -> F32:

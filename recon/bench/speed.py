@@ -40,6 +40,8 @@ from pathlib import Path
 
 import numpy as np
 
+from recon.startup import THREAD_VARIABLES
+
 REPETITIONS = 5  # repetitions of each measurement when run(cases=None)
 
 #: The import floor: the modules the numerical job needs (fixed; see the module docstring).
@@ -195,6 +197,9 @@ def run(cases: int | None = None, seed: int = 0) -> dict:
             "click_ms": click_ms,
         },
         "targets": TARGETS,
+        # the BLAS / OpenMP thread counts this process and its children ran with
+        # (recon.startup: the command line sets 1 unless the user set them)
+        "thread_env": {k: os.environ.get(k) for k in THREAD_VARIABLES},
         "cpus": os.cpu_count(),
         "load_average": list(os.getloadavg()),
     }
@@ -220,8 +225,9 @@ def format_table(result: dict) -> str:
         ("click_ms", "ms", runs["click_ms"]),
         ("peak_mb", "MB", runs["peak_mb"]),
     ]
+    threads = ", ".join(f"{k}={v}" for k, v in result.get("thread_env", {}).items())
     lines = [f"speed benchmark: demo case, {result['repetitions']} repetition(s), "
-             f"{result['cpus']} CPU(s), load {result['load_average'][0]:.2f}",
+             f"{result['cpus']} CPU(s), load {result['load_average'][0]:.2f}; {threads}",
              f"floor: python -c 'import {result['floor_imports']}'"]
     for key, unit, values in rows:
         value = result[key]

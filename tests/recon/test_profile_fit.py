@@ -71,3 +71,51 @@ def test_an_edge_enhanced_profile_is_fitted_with_its_unsharp_mask(
     r_plain = fit_profiles(prof, hw, 0.7, hw - 1.0, 0.05, None)[1][0]
     assert r_enh == pytest.approx(radius, rel=0.005)
     assert abs(r_plain / radius - 1.0) > 0.02
+
+
+def _tube_image(shape=(120, 160)) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """A blurred curved dark tube of varying radius (absorption image), points along
+    its axis, their normals and radius guesses of two window classes."""
+    rows, cols = np.mgrid[0 : shape[0], 0 : shape[1]].astype(float)
+    t = np.linspace(10.0, 150.0, 60)
+    axis = np.column_stack([t, 60.0 + 12.0 * np.sin(t / 25.0)])
+    radius = np.where(t < 80.0, 2.5, 6.0)
+    t_fine = np.linspace(0.0, 160.0, 1601)
+    d = np.full(shape, np.inf)
+    r_at = np.zeros(shape)
+    for c, r, rad in zip(t_fine, 60.0 + 12.0 * np.sin(t_fine / 25.0),
+                         np.where(t_fine < 80.0, 2.5, 6.0), strict=True):
+        dist = np.hypot(cols - c, rows - r)
+        closer = dist < d
+        d, r_at = np.where(closer, dist, d), np.where(closer, rad, r_at)
+    img = ndi.gaussian_filter(2.0 * np.sqrt(np.clip(r_at**2 - d**2, 0.0, None)), 0.8)
+    tangent = np.gradient(axis, axis=0)
+    tangent /= np.linalg.norm(tangent, axis=1, keepdims=True)
+    normals = np.column_stack([-tangent[:, 1], tangent[:, 0]])
+    return img + 0.01 * cols, axis + 0.4 * normals, normals, radius
+
+
+@pytest.mark.parametrize("search_shift", [True, False])
+def test_profiles_sampled_once_fit_as_when_sampled_each_time(search_shift: bool) -> None:
+    from recon.profile_fit import fit_along, sample_along, spline_coefficients
+
+    img, pts, normals, r_guess = _tube_image()
+    coef = spline_coefficients(img)
+    samples = sample_along(coef, pts, normals, r_guess, search_shift=search_shift, order=3)
+    assert len(samples.groups) == 2  # two window classes
+    for blur, enhance, power in ((0.8, (0.0, 0.0), 1.0), (0.6, (1.0, 4.0), 0.5)):
+        kw = dict(search_shift=search_shift, order=3, enhance=enhance,
+                  transform=lambda p, q=power: p**q)
+        each = fit_along(coef, pts, normals, r_guess, blur, 0.25, **kw)
+        once = fit_along(coef, pts, normals, r_guess, blur, 0.25, samples=samples, **kw)
+        for name in ("shift_px", "radius_px", "ok", "rss", "rss_fraction", "depth"):
+            np.testing.assert_array_equal(getattr(once, name), getattr(each, name))
+    plain = fit_along(coef, pts, normals, r_guess, 0.8, 0.25, search_shift=search_shift, order=3,
+                      natural_scale=None)  # the image blurs absorption, not intensity
+    inner = plain.ok & (np.abs(pts[:, 0] - 80.0) > 15.0) & (pts[:, 0] > 20) & (pts[:, 0] < 140)
+    assert np.median(np.abs(plain.radius_px[inner] - r_guess[inner]) / r_guess[inner]) < 0.03
+    if search_shift:  # the points were 0.4 px off the axis
+        assert np.median(plain.shift_px[inner]) == pytest.approx(-0.4, abs=0.1)
+    with pytest.raises(ValueError, match="samples of 60 points"):
+        fit_along(coef, pts[:10], normals[:10], r_guess[:10], 0.8, 0.25,
+                  search_shift=search_shift, order=3, samples=samples)

@@ -65,3 +65,15 @@ def test_block_marching_cubes_without_a_surface_is_refused() -> None:
     grid = np.full((10, 10, 10), 2.0, dtype=np.float32)
     with pytest.raises(ValueError, match="no surface"):
         surface._marching_cubes_on_blocks(grid, np.arange(10))
+
+
+def test_signed_volume_agrees_with_trimesh_and_tells_the_winding():
+    from recon.surface import signed_volume
+
+    box = trimesh.creation.box(extents=(2.0, 3.0, 4.0))
+    box.apply_translation((5.0, -7.0, 11.0))  # away from the origin: the tetrahedra cancel
+    assert signed_volume(box.vertices, box.faces) == pytest.approx(24.0, rel=1e-12)
+    sphere = trimesh.creation.icosphere(subdivisions=3, radius=2.5)
+    assert signed_volume(sphere.vertices, sphere.faces) == pytest.approx(sphere.volume, rel=1e-12)
+    assert signed_volume(sphere.vertices, sphere.faces[:, ::-1]) == pytest.approx(-sphere.volume,
+                                                                                  rel=1e-12)

@@ -37,4 +37,6 @@ def test_bench_speed_one_repetition_writes_every_figure(tmp_path: Path,
     assert {"trace", "calibrate", "match", "triangulate", "surface", "measure"} <= set(stages)
     assert all(math.isfinite(v) and v >= 0 for v in stages.values())
     assert sum(stages.values()) == pytest.approx(result["warm_ms"], rel=0.01, abs=0.1)
+    assert set(result["thread_env"]) == {"OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS",
+                                         "MKL_NUM_THREADS"}
     assert "median cold_over_floor" in capsys.readouterr().out
