@@ -66,7 +66,12 @@ def evaluate_case(job: tuple[str, int]) -> tuple[dict | None, dict | None]:
     }
     row: dict = {"preset": preset, "seed": case_seed, "stenosis_pct": stenosis,
                  "correction": report["calibration"]["correction"], "wall_ms": wall_ms,
-                 "intervals_ms": report["timings_ms"].get("intervals")}
+                 "intervals_ms": report["timings_ms"].get("intervals"),
+                 # the pipeline's own evidence of unreliable stretches
+                 "stretches": (report["consistency"] or {}).get("stretches", []),
+                 "overlap_mm": [report["centerline"]["overlap_a_mm"],
+                                report["centerline"]["overlap_b_mm"]],
+                 "flagged_mm": (report.get("uncertainty") or {}).get("flagged_mm")}
     for key in KEYS:
         lo, hi = report["measurements_ci95"][key]
         value = report["measurements"][key]
