@@ -94,7 +94,9 @@ class ReconstructionOptions:
     calibration : how far view B moves from its header: "full" (all six rig
         parameters, the default), "supported" (the correction the clicks support,
         :func:`recon.calibration.calibrate_supported`: the header, a translation of
-        B's rig, or the full correction) or "header" (B stays at its header pose).
+        B's rig, or the full correction), "header" (B stays at its header pose) or
+        "curves" (the full correction from the clicks and the two traced curves
+        jointly, :func:`recon.calibration_curves.calibrate_with_curves`).
         "supported" keeps good real headers (tests/recon/test_real_views.py) but its
         translation-only choice costs accuracy where the header is off in rotation
         too, as on the phantoms (docs/benchmarks.md); so it is not the default yet.
@@ -500,9 +502,10 @@ def _uncertainty_report(intervals: MeasurementIntervals | None) -> dict | None:
     if intervals is None:
         return None
     return {
-        "method": "sampled: view B's pose from the calibration's Laplace posterior and each "
-        "view's 2D radius error (from the two views' disagreement), re-triangulated and "
-        "re-measured per draw; interval = value +- 1.96 sd",
+        "method": "sampled: view B's pose from the calibration's Laplace posterior, each "
+        "view's 2D radius error (from the two views' disagreement) and an error both "
+        "views share (common_sd_px, assumed), re-triangulated and re-measured per draw; "
+        "interval = value +- 1.96 sd",
         "samples": intervals.n_samples,
         "lesion_found_fraction": intervals.lesion_found_fraction,
         "radius_error": intervals.radius_error,

@@ -528,6 +528,7 @@ def measurement_intervals(
             "offset_sd_rel": err_model.offset_sd,
             "local_sd_rel_median": float(np.median(err_model.local_sd)),
             "correlation_mm": err_model.correlation_mm,
+            "common_sd_px": COMMON_RADIUS_SD_PX,
         },
         flagged_mm=[[[float(s0[i]), float(s0[j - 1])] for i, j in f] for f in flags],
     )

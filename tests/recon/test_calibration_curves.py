@@ -132,3 +132,20 @@ def test_the_joint_posterior_is_narrower_and_says_so():
     assert words["summary"]
     assert both.error_after_px == pytest.approx(
         float(np.mean(both.residuals_px)), rel=1e-9)
+
+
+def test_the_pipeline_calibrates_on_the_curves_when_asked():
+    from recon.bench.reconstruct import case_angiograms
+    from recon.pipeline import ReconstructionOptions, reconstruct_pair
+    from recon.synth import make_phantom
+
+    case = make_phantom("data1", 4)
+    a, b = case_angiograms(case)
+    rec = reconstruct_pair(a, b, case.seeds, ReconstructionOptions(calibration="curves",
+                                                                   voxel_mm=0.6))
+    report = rec.report()["calibration"]
+    assert report["correction"] == "curves"
+    assert report["decision"]["clicks_only"]["chosen"] == "full"
+    assert report["decision"]["curve_points"] > 10
+    assert report["observability"]["summary"]
+    assert rec.intervals is not None and rec.intervals.ci95["mld_mm"][0] < rec.measurements.mld_mm
