@@ -170,3 +170,25 @@ def test_a_flagged_detour_widens_the_length_interval_towards_the_chord():
     flagged = measurement_intervals(VIEW_A, VIEW_B, cal.posterior, bent, meas, flagged_b=near)
     assert plain.ci95["segment_length_mm"][0] > straight_length
     assert flagged.ci95["segment_length_mm"][0] <= straight_length + 0.5
+
+
+def test_two_views_that_agree_still_leave_their_shared_fit_error():
+    """Both views read the same radius everywhere (no disagreement to learn from): the MLD
+    interval still spans the error both fits may share, COMMON_RADIUS_SD_PX of the
+    lesion's radius in px (one sd of the MLD at least 0.7 of that, relative)."""
+    from dataclasses import replace
+
+    from recon.uncertainty import COMMON_RADIUS_SD_PX
+
+    rng = np.random.default_rng(13)
+    cal, cl, _, _ = simulated(rng, rel_sd=0.0)
+    same = replace(cl, radius_b_mm=cl.radius_a_mm.copy())
+    area = elliptic_cross_sections(same, VIEW_A, cal.view_b).area_mm2
+    meas = measure_lumen(lumen_profile(same.s_mm, area))
+    iv = measurement_intervals(VIEW_A, VIEW_B, cal.posterior, same, meas)
+    k = int(np.argmin(same.radius_a_mm))
+    r_px = same.radius_a_mm[k] / radius_mm_eq11(np.ones(1), same.X_world[k : k + 1], VIEW_A)[0]
+    lo, hi = iv.ci95["mld_mm"]
+    sd_rel = (hi - lo) / 2 / 1.96 / meas.mld_mm
+    assert sd_rel > 0.7 * COMMON_RADIUS_SD_PX / r_px, (sd_rel, r_px)
+    assert iv.radius_error["common_sd_px"] == COMMON_RADIUS_SD_PX
