@@ -14,7 +14,11 @@ Reported: the coverage (share of cases whose interval holds the truth; the targe
 is 90-98 %), the median interval width, and the median |error| / (half-width /
 1.96), the error in units of the interval's sd (1 would be a calibrated Gaussian;
 above 1 the intervals are too narrow). Cases that fail to reconstruct are listed
-with their reason and do not count.
+with their reason and do not count. Each row also keeps the pipeline's own evidence
+of unreliable stretches (the cross-view check's ``stretches``, the overlap stretches
+per view, and the ``flagged_mm`` stretches the intervals drew as "that view is wrong
+there"), so coverage can be read separately where the pipeline knew and where it
+did not.
 """
 
 from __future__ import annotations
