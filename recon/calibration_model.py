@@ -169,6 +169,17 @@ class ResidualModel:
             cy + self.sigma_pp_px * z[:, j + 2 : j + 3],
         )
 
+    def relative_pose(self, z: NDArray) -> tuple[NDArray, NDArray]:
+        """Eq. (1) for a batch z (M, n): rotation R (M, 3, 3) from A's view frame to B's
+        and B's source tr (M, 3) in A's view frame (origin at A's source), so a point
+        x_a of A's frame is x_b = R (x_a - tr) in B's."""
+        rotvec = self.sigma_rot_rad * z[:, :3]
+        t = z[:, 3 : 3 + self.n_t] @ self.T.T  # (M, 3)
+        Rn = _rotation_batch(rotvec)  # (M, 3, 3) correction rotation
+        Rb = np.einsum("ij,mkj->mik", self.Rb0, Rn)  # R_b = R_b0 Rn^T
+        Sb = np.einsum("mij,j->mi", Rn, self.Sb0) + t  # B's source (M, 3)
+        return Rb @ self.Ra.T, (Sb - self.Sa) @ self.Ra.T
+
     # ------------------------------------------------------------ eq. (5)
     def project_pairs(self, z: NDArray) -> tuple[NDArray, NDArray]:
         """Back-projections (M, K, 2) into A and into B of the features triangulated under z (M, n).
@@ -176,11 +187,7 @@ class ResidualModel:
         Triangulation by eqs. (2)-(3) in view A's frame, as in
         :func:`recon.geometry.triangulate_paper`, written for a batch of poses.
         """
-        rotvec = self.sigma_rot_rad * z[:, :3]
-        t = z[:, 3 : 3 + self.n_t] @ self.T.T  # (M, 3)
-        Rn = _rotation_batch(rotvec)  # (M, 3, 3) correction rotation
-        Rb = np.einsum("ij,mkj->mik", self.Rb0, Rn)  # R_b = R_b0 Rn^T
-        Sb = np.einsum("mij,j->mi", Rn, self.Sb0) + t  # B's source (M, 3)
+        R, tr = self.relative_pose(z)  # eq. (1)
         sid_a, cx_a, cy_a = self._intrinsics(z, self.view_a, 0)
         sid_b, cx_b, cy_b = self._intrinsics(z, self.view_b, 1)
         sc_a, sr_a = self.spacing_a
@@ -192,8 +199,6 @@ class ResidualModel:
         eta_b = (self.pb[:, 1] - cy_b) * sr_b / sid_b
         shape = np.broadcast_shapes(np.shape(xi_a), np.shape(xi_b), (len(z), self.n_features))
         xi_a, eta_a, xi_b, eta_b = (np.broadcast_to(x, shape) for x in (xi_a, eta_a, xi_b, eta_b))
-        R = Rb @ self.Ra.T  # eq. (1): relative rotation (M, 3, 3)
-        tr = (Sb - self.Sa) @ self.Ra.T  # B's source in A's frame (M, 3)
         # eq. (2): vectors a, b per feature, components first: (3, M, K)
         a = R[:, 0, :].T[:, :, None] - xi_b[None] * R[:, 2, :].T[:, :, None]
         b = R[:, 1, :].T[:, :, None] - eta_b[None] * R[:, 2, :].T[:, :, None]

@@ -24,7 +24,7 @@ EXIT_USER_ERROR = 2
 _REAL_PROCESS = False  # main() runs as the process itself (not called in-process by a test)
 
 BENCHES = ("centerline", "calibration", "matching", "reconstruct", "speed", "intervals",
-           "sections", "optimal-view")
+           "sections", "optimal-view", "calibration-modes")
 
 
 class _Parser(argparse.ArgumentParser):
@@ -232,11 +232,11 @@ def build_parser() -> argparse.ArgumentParser:
         )
     p.add_argument(
         "--calibration",
-        choices=("full", "supported", "header"),
+        choices=("full", "supported", "header", "curves"),
         default="full",
         help="how far view B moves from its header: full (all six rig parameters; default), "
-        "supported (only as far as the clicks support: header, rig translation or full) "
-        "or header (no correction)",
+        "supported (only as far as the clicks support: header, rig translation or full), "
+        "header (no correction) or curves (full, from the clicks and the traced curves)",
     )
     p.add_argument(
         "--allow-close-views",
@@ -605,7 +605,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
         print(f"coronary3d: error: bench {args.name} has no --suite tree (reconstruct has)",
               file=sys.stderr)
         return EXIT_USER_ERROR
-    if args.name in ("centerline", "reconstruct"):
+    if args.name in ("centerline", "reconstruct", "calibration-modes"):
         extra["suite"] = args.suite
     elif args.suite != "regular":
         print(f"coronary3d: error: bench {args.name} has no --suite {args.suite} "
@@ -618,8 +618,8 @@ def cmd_bench(args: argparse.Namespace) -> int:
             return EXIT_USER_ERROR
         extra["jitter"] = args.jitter
     if args.workers is not None:
-        if (args.name not in ("reconstruct", "intervals") or args.suite != "regular"
-                or args.workers < 1):
+        if args.workers < 1 or not (args.name == "calibration-modes" or (
+                args.name in ("reconstruct", "intervals") and args.suite == "regular")):
             print("coronary3d: error: --workers N (N >= 1) is for bench reconstruct "
                   "(regular suite) and bench intervals", file=sys.stderr)
             return EXIT_USER_ERROR

@@ -33,6 +33,7 @@ from recon.calibration import (
     calibrate_supported,
     refine_with_matches,
 )
+from recon.calibration_curves import calibrate_with_curves
 from recon.centerline import VesselnessMap, compute_vesselness, trace_segment
 from recon.consistency import ConsistencyResult, check_consistency
 from recon.errors import CoronaryError
@@ -63,6 +64,7 @@ CALIBRATION_CHOICES: dict[str, tuple[str, ...]] = {
     "supported": tuple(CORRECTIONS),
     "full": ("full",),
     "header": ("header",),
+    "curves": ("full",),  # the full clicks-only correction, then the curves jointly
 }
 
 
@@ -92,7 +94,9 @@ class ReconstructionOptions:
     calibration : how far view B moves from its header: "full" (all six rig
         parameters, the default), "supported" (the correction the clicks support,
         :func:`recon.calibration.calibrate_supported`: the header, a translation of
-        B's rig, or the full correction) or "header" (B stays at its header pose).
+        B's rig, or the full correction), "header" (B stays at its header pose) or
+        "curves" (the full correction from the clicks and the two traced curves
+        jointly, :func:`recon.calibration_curves.calibrate_with_curves`).
         "supported" keeps good real headers (tests/recon/test_real_views.py) but its
         translation-only choice costs accuracy where the header is off in rotation
         too, as on the phantoms (docs/benchmarks.md); so it is not the default yet.
@@ -267,8 +271,12 @@ def calibrate_from_seeds(
         cl_b = _trace(angio_b, seg.b, vesselness[1], "B",
                       angio_b.geometry.pixel_mm_at_isocenter, intensity[1])
     pa, pb = _features(seeds, segment, cl_a, cl_b)
-    return calibrate_supported(angio_a.geometry, angio_b.geometry, pa, pb, method=optimizer,
-                               candidates=CALIBRATION_CHOICES[calibration])
+    cal = calibrate_supported(angio_a.geometry, angio_b.geometry, pa, pb, method=optimizer,
+                              candidates=CALIBRATION_CHOICES[calibration])
+    if calibration == "curves" and cl_a is not None and cl_b is not None:
+        cal = calibrate_with_curves(angio_a.geometry, angio_b.geometry, pa, pb,
+                                    cl_a.points_px, cl_b.points_px, initial=cal)
+    return cal
 
 
 def reconstruct_pair(
@@ -334,6 +342,9 @@ def reconstruct_pair(
     cal = calibration or calibrate_supported(
         view_a, view_b_header, feat_a, feat_b, method=options.optimizer,
         candidates=CALIBRATION_CHOICES[options.calibration])
+    if calibration is None and options.calibration == "curves":  # the traced curves too
+        cal = calibrate_with_curves(view_a, view_b_header, feat_a, feat_b, cl_a.points_px,
+                                    cl_b.points_px, initial=cal)
     steps = [_step("features" if calibration is None else "tree", cal)]
     lap("calibrate")
 
@@ -389,7 +400,8 @@ def reconstruct_pair(
     if cal.posterior is not None:
         _notify(progress, "estimating the intervals", 0.97)
         intervals = measurement_intervals(view_a, view_b_header, cal.posterior, cl3d,
-                                          measurements)
+                                          measurements, flagged_a=consistency.a.flagged,
+                                          flagged_b=consistency.b.flagged)
         lap("intervals")
     timings["total"] = round(sum(timings.values()), 2)
     _notify(progress, "done", 1.0)
@@ -490,12 +502,16 @@ def _uncertainty_report(intervals: MeasurementIntervals | None) -> dict | None:
     if intervals is None:
         return None
     return {
-        "method": "sampled: view B's pose from the calibration's Laplace posterior and each "
-        "view's 2D radius error (from the two views' disagreement), re-triangulated and "
-        "re-measured per draw; interval = value +- 1.96 sd",
+        "method": "sampled: view B's pose from the calibration's Laplace posterior, each "
+        "view's 2D radius error (from the two views' disagreement) and an error both "
+        "views share (common_sd_px, assumed), re-triangulated and re-measured per draw; "
+        "interval = value +- 1.96 sd",
         "samples": intervals.n_samples,
         "lesion_found_fraction": intervals.lesion_found_fraction,
         "radius_error": intervals.radius_error,
+        # stretches (per view A, B; mm) the cross-view check flagged: drawn also as
+        # "that view is wrong there" (its radius from the other view, a detour removed)
+        "flagged_mm": intervals.flagged_mm,
     }
 
 

@@ -39,7 +39,7 @@ as far as the data support" (:func:`recon.calibration.calibrate_supported`).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -315,6 +315,11 @@ def observability(posterior: PosePosterior) -> dict:
 CI_SAMPLES = 32  # posterior draws per reconstruction (sd to about 13 %)
 CI_Z = 1.959964  # two-sided 95 % normal quantile
 _RADIUS_CORRELATION_MAX_MM = 5.0
+# sd (px) of the 2D radius error the two views share (the profile model's own bias at a
+# narrowing, the blur model): an assumption, set from `bench centerline`'s radius mean
+# absolute error of 0.14 px against the phantom's truth (docs/benchmarks.md); the two
+# views' disagreement cannot show it
+COMMON_RADIUS_SD_PX = 0.15
 _RADIUS_LOCAL_WINDOW_MM = 5.0
 
 
@@ -342,16 +347,22 @@ class RadiusErrorModel:
     local_sd: FloatArray
     correlation_mm: float
 
-    def sample(self, rng: np.random.Generator, s_mm: FloatArray, n: int) -> FloatArray:
-        """(n, 2, M) draws of ln-radius errors of views A and B at arc lengths s_mm (M,)."""
+    def field(self, rng: np.random.Generator, s_mm: FloatArray, shape: tuple[int, ...]
+              ) -> FloatArray:
+        """(*shape, M) draws of a unit-sd Gaussian field along s_mm (M,) with the model's
+        correlation length."""
         from scipy.ndimage import gaussian_filter1d
 
         m = len(s_mm)
         step = float(np.median(np.diff(s_mm))) if m > 1 else 1.0
         width = max(self.correlation_mm / step / np.sqrt(2.0), 1e-3)  # kernel sd in samples
-        white = rng.standard_normal((n, 2, m))
-        field = gaussian_filter1d(white, width, axis=-1, mode="reflect")
-        field /= np.maximum(np.std(field, axis=-1, keepdims=True), 1e-12)
+        field = gaussian_filter1d(rng.standard_normal((*shape, m)), width, axis=-1,
+                                  mode="reflect")
+        return field / np.maximum(np.std(field, axis=-1, keepdims=True), 1e-12)
+
+    def sample(self, rng: np.random.Generator, s_mm: FloatArray, n: int) -> FloatArray:
+        """(n, 2, M) draws of ln-radius errors of views A and B at arc lengths s_mm (M,)."""
+        field = self.field(rng, s_mm, (n, 2))
         offset = self.offset_sd * rng.standard_normal((n, 2, 1))
         return offset + self.local_sd[None, None, :] * field
 
@@ -395,6 +406,8 @@ class MeasurementIntervals:
     n_samples : posterior draws behind them.
     lesion_found_fraction : share of the draws that found a lesion.
     radius_error : the 2D radius error model used (JSON-ready figures).
+    flagged_mm : per view (A, B), the [start, end] mm stretches drawn under the
+        "that view is wrong there" hypothesis too.
     """
 
     ci95: dict[str, tuple[float, float]]
@@ -403,6 +416,7 @@ class MeasurementIntervals:
     n_samples: int
     lesion_found_fraction: float
     radius_error: dict
+    flagged_mm: list = field(default_factory=list)
 
 
 def measurement_intervals(
@@ -414,6 +428,8 @@ def measurement_intervals(
     *,
     n_samples: int = CI_SAMPLES,
     seed: int = 0,
+    flagged_a: NDArray[np.bool_] | None = None,
+    flagged_b: NDArray[np.bool_] | None = None,
 ) -> MeasurementIntervals:
     """95 % intervals by sampling the pose posterior and the 2D radius error.
 
@@ -421,12 +437,25 @@ def measurement_intervals(
     covariance, so the baseline scale's prior counts too) and re-triangulates the
     reconstructed centerline's own projections (M points, the correspondence held:
     to first order a pose change moves the smooth curve as it moves its points),
-    rescales each view's radius by eq. (11)'s depth ratio and by the draw of
-    :func:`radius_error_model` (estimated on ``centerline``), builds the elliptic
+    rescales each view's radius by eq. (11)'s depth ratio, by the draw of
+    :func:`radius_error_model` (estimated on ``centerline``) and by a draw of the
+    error both views' fits share (:data:`COMMON_RADIUS_SD_PX` relative to each view's
+    radius in px, one field for both views: no disagreement shows it), builds the elliptic
     sections (no surface) and measures (:func:`recon.measure.lumen_profile`,
     :func:`recon.measure.measure_lumen`). The interval of each figure is its value
     in ``measurements`` +- 1.96 sample sd (centred on the reported figure: the draws'
     minima are biased low), lengths and diameters clipped at 0.
+
+    ``flagged_a`` / ``flagged_b`` (M,) bool: where the pipeline has evidence that
+    that view's trace is wrong (:mod:`recon.consistency`: the 3D centerline is off
+    the view's vessel, or its arc length disagrees with the trace: a detour, a trace
+    onto a neighbour). There the draws are a mixture of two hypotheses, each with
+    probability 1/2 per draw and view: the measurement as made, or the flagged view
+    wrong over each flagged stretch, i.e. its radius replaced by the other view's
+    and the stretch's 3D path by the straight chord between the stretch's ends (a
+    detour removed). The interval then spans both readings where, and only where,
+    the evidence is. Each flagged stretch also loses the local radius model's
+    averaging (the disagreement there is evidence, not noise).
     """
     from recon.geometry import triangulate
     from recon.measure import lumen_profile, measure_lumen
@@ -443,7 +472,14 @@ def measurement_intervals(
     fa0, fb0 = radius_mm_eq11(ones, X0, view_a), radius_mm_eq11(ones, X0, view_b0)
     err_model = radius_error_model(s0, centerline.radius_a_mm, centerline.radius_b_mm)
     errors = err_model.sample(rng, s0, n_samples)  # (n, 2, M)
+    # the part of the 2D fits' error both views share (invisible in their disagreement):
+    # COMMON_RADIUS_SD_PX per view, relative to each view's radius in px
+    radius_px = np.stack([centerline.radius_a_mm / fa0, centerline.radius_b_mm / fb0])
+    common = err_model.field(rng, s0, (n_samples, 1))  # (n, 1, M), one draw for both views
+    errors = errors + common * (COMMON_RADIUS_SD_PX / np.maximum(radius_px, 0.5))[None]
     zs = posterior.sample_z(rng, n_samples)
+    flags = [_flag_runs(f, len(s0)) for f in (flagged_a, flagged_b)]
+    coins = rng.random((n_samples, 2)) < 0.5
     values: dict[str, list[float]] = {}
     radii = np.empty((n_samples, len(s0)))
     found = 0
@@ -451,6 +487,10 @@ def measurement_intervals(
         pose = posterior.pose_map @ zs[k]
         view_b = view_b_header.with_correction(pose[:3], pose[3:])
         X = triangulate(pa, pb, view_a, view_b)
+        r_a, r_b = centerline.radius_a_mm, centerline.radius_b_mm
+        for v in (0, 1):
+            if coins[k, v] and flags[v]:
+                X, r_a, r_b = _flagged_view_wrong(X, r_a, r_b, flags[v], v)
         tangents = np.gradient(X, axis=0)
         tangents /= np.maximum(np.linalg.norm(tangents, axis=1, keepdims=True), 1e-12)
         cl = replace(
@@ -458,10 +498,8 @@ def measurement_intervals(
             X_world=X,
             s_mm=arclength(X),
             tangents=tangents,
-            radius_a_mm=centerline.radius_a_mm * radius_mm_eq11(ones, X, view_a) / fa0
-            * np.exp(errors[k, 0]),
-            radius_b_mm=centerline.radius_b_mm * radius_mm_eq11(ones, X, view_b) / fb0
-            * np.exp(errors[k, 1]),
+            radius_a_mm=r_a * radius_mm_eq11(ones, X, view_a) / fa0 * np.exp(errors[k, 0]),
+            radius_b_mm=r_b * radius_mm_eq11(ones, X, view_b) / fb0 * np.exp(errors[k, 1]),
         )
         area = elliptic_cross_sections(cl, view_a, view_b).area_mm2
         m = measure_lumen(lumen_profile(cl.s_mm, area))
@@ -490,5 +528,42 @@ def measurement_intervals(
             "offset_sd_rel": err_model.offset_sd,
             "local_sd_rel_median": float(np.median(err_model.local_sd)),
             "correlation_mm": err_model.correlation_mm,
+            "common_sd_px": COMMON_RADIUS_SD_PX,
         },
+        flagged_mm=[[[float(s0[i]), float(s0[j - 1])] for i, j in f] for f in flags],
     )
+
+
+def _flag_runs(flagged: NDArray[np.bool_] | None, m: int) -> list[tuple[int, int]]:
+    """Runs [i, j) of True in a (m,) bool mask (none for None)."""
+    if flagged is None:
+        return []
+    f = np.asarray(flagged, dtype=bool)
+    if f.shape != (m,):
+        raise ValueError(f"flagged mask must be ({m},), got {f.shape}")
+    edges = np.diff(np.concatenate([[0], f.astype(np.int8), [0]]))
+    return list(zip(np.flatnonzero(edges == 1).tolist(), np.flatnonzero(edges == -1).tolist(),
+                    strict=True))
+
+
+def _flagged_view_wrong(
+    X: FloatArray, r_a: FloatArray, r_b: FloatArray, runs: list[tuple[int, int]], view: int
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """The hypothesis "view ``view`` (0 = A, 1 = B) is wrong over ``runs``": its radius
+    there replaced by the other view's, each run's points (M, 3) moved onto the chord
+    between the run's neighbours (a detour removed), at the same fractions of the
+    run's arc length."""
+    X, r_a, r_b = X.copy(), r_a.copy(), r_b.copy()
+    m = len(X)
+    for i, j in runs:
+        if view == 0:
+            r_a[i:j] = r_b[i:j]
+        else:
+            r_b[i:j] = r_a[i:j]
+        lo, hi = max(i - 1, 0), min(j, m - 1)
+        if hi - lo < 2:
+            continue
+        seg = np.linalg.norm(np.diff(X[lo : hi + 1], axis=0), axis=1)
+        t = np.concatenate([[0.0], np.cumsum(seg)]) / max(float(np.sum(seg)), 1e-12)
+        X[lo : hi + 1] = X[lo] + t[:, None] * (X[hi] - X[lo])[None, :]
+    return X, r_a, r_b

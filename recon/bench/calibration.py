@@ -45,6 +45,11 @@ two ways, both reported:
 - "oracle": the true correspondences (the same 3D sample in both views),
   an upper bound for a perfect matcher.
 
+Curves (``self_calibration.with_curves``): the clicks and the same noisy true
+curves, without pairs, by :func:`recon.calibration_curves.calibrate_with_curves`
+(the epipolar distance of every curve point to the other view's curve, Cauchy
+loss; "pairs" is then the number of curve points).
+
 Landmarks (``landmarks`` in the result): the same PALM calibration with more
 clicked landmarks than the seeds hold, spread over the tree: the seeds'
 clicks plus the distal ends of the side branches, then also both ends of the
@@ -77,6 +82,7 @@ from recon.calibration import (
     calibrate,
     refine_with_matches,
 )
+from recon.calibration_curves import calibrate_with_curves
 from recon.geometry import ViewGeometry, epipolar_lines, triangulate
 from recon.synth import PhantomCase, click_px, make_phantom
 
@@ -298,6 +304,7 @@ def run(cases: int | None = None, seed: int = 0) -> dict:
     features_only: list[dict] = []
     epipolar: list[dict] = []
     oracle: list[dict] = []
+    with_curves: list[dict] = []
     ref_header: list[dict] = []
     ref_prior: list[dict] = []
     n_features: list[int] = []
@@ -344,6 +351,15 @@ def run(cases: int | None = None, seed: int = 0) -> dict:
                 landmarks[key].append(_record(result, case, header))
                 n_landmarks[key].append(len(la))
             noisy_a, noisy_b, _, _ = _matched_curves(case, rng)
+            t0 = time.perf_counter()
+            joint = calibrate_with_curves(case.view_a, case.view_b_nominal, pa, pb, noisy_a,
+                                          noisy_b)
+            with_curves.append({
+                **pose_errors(joint.view_b, case.view_b_true, case.view_a, X),
+                "error_after_px": joint.error_after_px,
+                "ms": (time.perf_counter() - t0) * 1e3,
+                "pairs": joint.decision["curve_points"],
+            })
             for kind, (ma, mb) in (
                 ("epipolar", epipolar_pairs(noisy_a, noisy_b, case.view_a, palm_result.view_b)),
                 ("oracle", (noisy_a, noisy_b)),
@@ -382,6 +398,7 @@ def run(cases: int | None = None, seed: int = 0) -> dict:
             "features_only": _pose_summary(features_only, header_records),
             "with_matches_epipolar": _pose_summary(epipolar, header_records),
             "with_matches_oracle": _pose_summary(oracle, header_records),
+            "with_curves": _pose_summary(with_curves, header_records),
             "reference_gauge_at_header": _pose_summary(ref_header, header_records),
             "reference_gauge_from_priors": _pose_summary(ref_prior, header_records),
             "runs": len(header_records),
@@ -442,6 +459,7 @@ def format_table(result: dict) -> str:
         ("features only", "features_only"),
         ("+ matches (epipolar)", "with_matches_epipolar"),
         ("+ matches (oracle)", "with_matches_oracle"),
+        ("clicks + curves", "with_curves"),
         ("exact, gauge=header", "reference_gauge_at_header"),
         ("exact, gauge by prior", "reference_gauge_from_priors"),
     ):

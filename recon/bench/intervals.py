@@ -14,7 +14,11 @@ Reported: the coverage (share of cases whose interval holds the truth; the targe
 is 90-98 %), the median interval width, and the median |error| / (half-width /
 1.96), the error in units of the interval's sd (1 would be a calibrated Gaussian;
 above 1 the intervals are too narrow). Cases that fail to reconstruct are listed
-with their reason and do not count.
+with their reason and do not count. Each row also keeps the pipeline's own evidence
+of unreliable stretches (the cross-view check's ``stretches``, the overlap stretches
+per view, and the ``flagged_mm`` stretches the intervals drew as "that view is wrong
+there"), so coverage can be read separately where the pipeline knew and where it
+did not.
 """
 
 from __future__ import annotations
@@ -66,7 +70,12 @@ def evaluate_case(job: tuple[str, int]) -> tuple[dict | None, dict | None]:
     }
     row: dict = {"preset": preset, "seed": case_seed, "stenosis_pct": stenosis,
                  "correction": report["calibration"]["correction"], "wall_ms": wall_ms,
-                 "intervals_ms": report["timings_ms"].get("intervals")}
+                 "intervals_ms": report["timings_ms"].get("intervals"),
+                 # the pipeline's own evidence of unreliable stretches
+                 "stretches": (report["consistency"] or {}).get("stretches", []),
+                 "overlap_mm": [report["centerline"]["overlap_a_mm"],
+                                report["centerline"]["overlap_b_mm"]],
+                 "flagged_mm": (report.get("uncertainty") or {}).get("flagged_mm")}
     for key in KEYS:
         lo, hi = report["measurements_ci95"][key]
         value = report["measurements"][key]

@@ -115,3 +115,80 @@ def test_the_radius_error_model_recovers_a_known_error():
     assert model.offset_sd < 0.02
     same = radius_error_model(arclength(X), r, r)  # two views that agree: no 2D error
     assert same.offset_sd == 0.0 and np.all(same.local_sd == 0.0)
+
+
+def test_a_flagged_stretch_carries_the_other_views_reading_into_the_interval():
+    """View A sees no narrowing (another vessel over the lesion, missed by the fit): the
+    reported MLD is near the reference. With the stretch flagged for view A (as the
+    cross-view check flags it) the interval holds the truth (the other view's reading), and
+    the figures away from the stretch (the reference diameter) keep their width."""
+    rng = np.random.default_rng(11)
+    cal, cl, _, true = simulated(rng, rel_sd=0.02)
+    s = cl.s_mm
+    mid = 0.5 * s[-1]
+    near = np.abs(s - mid) < 6.0
+    r_a = cl.radius_a_mm.copy()
+    r_a[near] = np.median(cl.radius_a_mm[~near])  # view A misses the narrowing
+    from dataclasses import replace
+
+    bad = replace(cl, radius_a_mm=r_a)
+    area = elliptic_cross_sections(bad, VIEW_A, cal.view_b).area_mm2
+    meas = measure_lumen(lumen_profile(bad.s_mm, area))
+    plain = measurement_intervals(VIEW_A, VIEW_B, cal.posterior, bad, meas)
+    flagged = measurement_intervals(VIEW_A, VIEW_B, cal.posterior, bad, meas, flagged_a=near)
+    assert meas.mld_mm > true["mld_mm"] + 0.5
+    lo, hi = flagged.ci95["mld_mm"]
+    assert lo <= true["mld_mm"] <= hi, (lo, hi)
+    width = {k: np.ptp(iv.ci95["reference_diameter_mm"]) for k, iv in
+             (("plain", plain), ("flagged", flagged))}
+    assert width["flagged"] < 1.5 * width["plain"], width
+    assert flagged.flagged_mm[0] and not flagged.flagged_mm[1]
+    assert flagged.flagged_mm[0][0][0] == pytest.approx(mid - 6.0, abs=0.5)
+
+
+def test_a_flagged_detour_widens_the_length_interval_towards_the_chord():
+    """A stretch of the 3D centerline that detoured (flagged): the segment-length interval
+    reaches down to the length with the detour replaced by its chord."""
+    rng = np.random.default_rng(12)
+    cal, cl, meas, _ = simulated(rng, rel_sd=0.02)
+    s = cl.s_mm
+    X = cl.X_world.copy()
+    mid = 0.5 * s[-1]
+    near = np.abs(s - mid - 15.0) < 4.0
+    bump = np.where(near, np.cos(np.pi * (s - mid - 15.0) / 8.0), 0.0)
+    X[:, 2] += 6.0 * bump  # a 6 mm detour over 8 mm
+    T = np.gradient(X, axis=0)
+    T /= np.linalg.norm(T, axis=1, keepdims=True)
+    from dataclasses import replace
+
+    bent = replace(cl, X_world=X, s_mm=arclength(X), tangents=T)
+    area = elliptic_cross_sections(bent, VIEW_A, cal.view_b).area_mm2
+    meas = measure_lumen(lumen_profile(bent.s_mm, area))
+    straight_length = float(arclength(cl.X_world)[-1])
+    assert meas.segment_length_mm > straight_length + 3.0
+    plain = measurement_intervals(VIEW_A, VIEW_B, cal.posterior, bent, meas)
+    flagged = measurement_intervals(VIEW_A, VIEW_B, cal.posterior, bent, meas, flagged_b=near)
+    assert plain.ci95["segment_length_mm"][0] > straight_length
+    assert flagged.ci95["segment_length_mm"][0] <= straight_length + 0.5
+
+
+def test_two_views_that_agree_still_leave_their_shared_fit_error():
+    """Both views read the same radius everywhere (no disagreement to learn from): the MLD
+    interval still spans the error both fits may share, COMMON_RADIUS_SD_PX of the
+    lesion's radius in px (one sd of the MLD at least 0.7 of that, relative)."""
+    from dataclasses import replace
+
+    from recon.uncertainty import COMMON_RADIUS_SD_PX
+
+    rng = np.random.default_rng(13)
+    cal, cl, _, _ = simulated(rng, rel_sd=0.0)
+    same = replace(cl, radius_b_mm=cl.radius_a_mm.copy())
+    area = elliptic_cross_sections(same, VIEW_A, cal.view_b).area_mm2
+    meas = measure_lumen(lumen_profile(same.s_mm, area))
+    iv = measurement_intervals(VIEW_A, VIEW_B, cal.posterior, same, meas)
+    k = int(np.argmin(same.radius_a_mm))
+    r_px = same.radius_a_mm[k] / radius_mm_eq11(np.ones(1), same.X_world[k : k + 1], VIEW_A)[0]
+    lo, hi = iv.ci95["mld_mm"]
+    sd_rel = (hi - lo) / 2 / 1.96 / meas.mld_mm
+    assert sd_rel > 0.7 * COMMON_RADIUS_SD_PX / r_px, (sd_rel, r_px)
+    assert iv.radius_error["common_sd_px"] == COMMON_RADIUS_SD_PX

@@ -12,14 +12,15 @@ from recon.bench.common import pose_error
 from recon.synth import make_phantom
 
 BENCHES = ("centerline", "calibration", "matching", "reconstruct", "speed", "intervals",
-           "sections", "optimal_view")
+           "sections", "optimal_view", "calibration_modes")
 
 
 #: Parameters after (cases, seed): the suite for the benches that take --suite varied,
 #: and the click jitter and the Dask workers of bench reconstruct.
 EXTRA = {"centerline": {"suite": "regular"},
          "reconstruct": {"suite": "regular", "jitter": 0, "workers": None},
-         "intervals": {"workers": None, "checkpoint": None}}
+         "intervals": {"workers": None, "checkpoint": None},
+         "calibration_modes": {"suite": "regular", "workers": None}}
 
 
 @pytest.mark.parametrize("name", BENCHES)
