@@ -1,4 +1,4 @@
-"""`coronary3d bench calibration_modes`: is the calibrated pose ever worse than the header?
+"""`coronary3d bench calibration-modes`: is the calibrated pose ever worse than the header?
 
 For each phantom case of a suite ("regular": ``PRESET_CYCLE[k % 4]``, seed
 ``seed + k``; "varied": :func:`recon.synth.suites.varied_cases`, ``cases`` per
@@ -140,7 +140,7 @@ def summarise(outcomes: list[dict], suite: str) -> dict:
     rows = [o for o in outcomes if "error" not in o]
     failures = [o for o in outcomes if "error" in o]
     if not rows:
-        raise ValueError(f"bench calibration_modes: all {len(outcomes)} cases failed, first: "
+        raise ValueError(f"bench calibration-modes: all {len(outcomes)} cases failed, first: "
                          f"{failures[0]}")
     chosen: dict[str, int] = {}
     for r in rows:
@@ -182,7 +182,7 @@ def run(cases: int | None = None, seed: int = 0, suite: str = "regular",
 def format_table(result: dict) -> str:
     """One line per mode."""
     lines = [
-        f"bench calibration_modes, {result['suite']} suite: {result['cases']} cases "
+        f"bench calibration-modes, {result['suite']} suite: {result['cases']} cases "
         f"({len(result['failures'])} failed); 3D error of the segment with the calibrated "
         "pose, scale-free (RMS mm)",
         f"{'mode':<10}{'<=hdr+0.1':>10}{'<hdr':>7}{'median':>8}{'hdr med':>8}{'change':>8}"
