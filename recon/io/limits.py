@@ -157,6 +157,10 @@ def job_limits(limits: JobLimits, what: str = "the reconstruction",
         raise LimitError(_memory_message(what, limits)) from None
     except _CpuLimitReached:
         raise LimitError(_cpu_message(what, limits)) from None
+    except Exception as exc:  # a native library's own out-of-memory error (OpenCV's)
+        if limits.memory_bytes is None or not _allocation_failed(exc):
+            raise
+        raise LimitError(_memory_message(what, limits)) from None
     finally:
         done.set()
         resource.setrlimit(resource.RLIMIT_DATA, old_data)
@@ -164,6 +168,13 @@ def job_limits(limits: JobLimits, what: str = "the reconstruction",
             resource.setrlimit(resource.RLIMIT_CPU, old_cpu)
             signal.signal(signal.SIGXCPU, old_handler if old_handler is not None  # type: ignore
                           else signal.SIG_DFL)
+
+
+def _allocation_failed(exc: Exception) -> bool:
+    """True for an error a native library raises when an allocation fails (OpenCV's
+    ``cv2.error`` "Insufficient memory", a C++ ``std::bad_alloc``)."""
+    text = str(exc)
+    return any(s in text for s in ("Insufficient memory", "Failed to allocate", "bad_alloc"))
 
 
 def _warm_blas() -> None:
