@@ -10,7 +10,8 @@ one output folder, each sent SIGTERM, SIGINT or SIGKILL at a random moment of
 its run (most of them within the writing of the outputs): a pass when no
 traceback is printed, no temporary file is left (after a SIGKILL: once the next
 run has swept it) and the folder holds one complete set that matches its
-manifest, or the earlier one, or nothing.
+manifest, or the earlier one, or nothing, or (when an earlier SIGKILL left it
+so) a set its manifest marks incomplete.
 
 Each in-process case is timed (the count over 60 s and the longest are
 printed: a hang would show there). A SIGTERM that reaches this process while
@@ -109,9 +110,12 @@ def signal_runs(n: int, seed: int, folder: Path) -> Counter[str]:
             counts[f"fail: traceback after {name}"] += 1
         elif sig == signal.SIGKILL and state != "complete" and state != "absent":
             counts[f"{name}: left for the next run ({state[:30]})"] += 1
-        elif state != "complete" and sig != signal.SIGKILL and _set_state(out) == before:
-            counts[f"{name} {when}: exit {proc.returncode}, the folder as the earlier "
-                   f"SIGKILL left it"] += 1
+        elif sig != signal.SIGKILL and before not in ("complete", "absent") and (
+                state == "manifest says incomplete" or _set_state(out) == before):
+            # an earlier SIGKILL broke the set; this run, stopped, made it no worse (its own
+            # temporaries gone, the earlier ones swept if it got that far)
+            counts[f"{name} {when}: exit {proc.returncode}, still incomplete from the "
+                   f"earlier SIGKILL"] += 1
         elif state not in ("complete", "absent"):  # "complete, beside ...": not swept
             counts[f"fail: {name} {when}: {state}"] += 1
         else:
