@@ -31,10 +31,16 @@ import subprocess
 import sys
 import threading
 from collections.abc import Callable
-from typing import IO, Any
+from typing import IO, TYPE_CHECKING, Any
 
 from recon.errors import CoronaryError
 from recon.io.limits import LimitError
+
+if TYPE_CHECKING:
+    from recon.centerline import VesselnessMap
+    from recon.pipeline import Reconstruction, ReconstructionOptions
+    from recon.seeds import Seeds
+    from recon.types import Angiogram
 
 __all__ = ["JobFailed", "run_isolated", "reconstruct_limited"]
 
@@ -180,9 +186,11 @@ def _child() -> int:
     return 0
 
 
-def reconstruct_limited(angio_a, angio_b, seeds, options, vesselness=None,
+def reconstruct_limited(angio_a: Angiogram, angio_b: Angiogram, seeds: Seeds,
+                        options: ReconstructionOptions,
+                        vesselness: tuple[VesselnessMap, VesselnessMap] | None = None,
                         memory_gb: float | None = None, cpu_s: float | None = None,
-                        progress: Progress | None = None):
+                        progress: Progress | None = None) -> Reconstruction:
     """``reconstruct_pair`` under the job's limits (for views of this size, or the ones
     given): the viewer's Reconstruct, through :func:`run_isolated`."""
     from recon.io.limits import job_limits, limits_for
