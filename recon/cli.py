@@ -257,12 +257,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="put the patient name, ID and study date from the DICOM headers in "
                    "report.pdf")
     p.add_argument("--quiet", action="store_true", help="no progress on stderr")
-    p.add_argument("--max-memory-gb", type=_number(float, 0.0), metavar="GB",
-                   help="memory the job may use (default 1.5 GB for 512 x 512 views, in "
-                   "proportion for larger ones; 0: no limit)")
-    p.add_argument("--max-cpu-s", type=_number(float, 0.0), metavar="S",
-                   help="CPU time the job may use (default 60 s for 512 x 512 views, in "
-                   "proportion for larger ones; 0: no limit)")
+    _add_limit_options(p, "the job")
     _add_geometry_options(p, per_file=True)
 
     p = sub.add_parser(
@@ -286,6 +281,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--sr", action="store_true",
                    help="also write measurements-sr.dcm per case (DICOM inputs only)")
     p.add_argument("--quiet", action="store_true", help="no progress on stderr")
+    _add_limit_options(p, "each case")
 
     p = sub.add_parser(
         "view",
@@ -497,6 +493,14 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
     return 0
 
 
+def _add_limit_options(p: argparse.ArgumentParser, who: str) -> None:
+    for flag, what, default in (("--max-memory-gb", "memory", "1.5 GB"),
+                                ("--max-cpu-s", "CPU time", "60 s")):
+        p.add_argument(flag, type=_number(float, 0.0), metavar=flag.rsplit("-", 1)[1].upper(),
+                       help=f"{what} {who} may use (default {default} for 512 x 512 views, "
+                       "in proportion for larger ones; 0: no limit)")
+
+
 def _mesh_formats(text: str) -> tuple[str, ...] | None:
     """The --format list, or None (after one error line) when it names an unknown format."""
     from recon.io.outputs import MESH_FORMATS
@@ -516,9 +520,6 @@ def cmd_batch(args: argparse.Namespace) -> int:
     formats = _mesh_formats(args.format)
     if formats is None:
         return EXIT_USER_ERROR
-    if args.workers < 1:
-        print(f"coronary3d: error: --workers {args.workers}: give at least 1", file=sys.stderr)
-        return EXIT_USER_ERROR
     cases = read_manifest(args.manifest)
     tty = sys.stderr.isatty()
 
@@ -526,8 +527,9 @@ def cmd_batch(args: argparse.Namespace) -> int:
         if args.quiet:
             return
         where = args.scheduler or f"a local cluster of {args.workers} worker(s)"
+        swept = f"; {len(summary.swept)} left by a killed run removed" if summary.swept else ""
         print(f"{len(cases)} case(s): {summary.skipped} already recorded, {n_to_run} to run "
-              f"on {where}", file=sys.stderr)
+              f"on {where}{swept}", file=sys.stderr)
         if n_to_run:
             dashboard = summary.dashboard or "not available (install coronary3d[batch])"
             print(f"Dask dashboard: {dashboard}", file=sys.stderr)
@@ -555,6 +557,7 @@ def cmd_batch(args: argparse.Namespace) -> int:
         retry_failed=args.retry_failed,
         on_start=on_start,
         on_case=on_case,
+        limits=(args.max_memory_gb, args.max_cpu_s),
     )
     if not args.quiet:
         for record in summary.records:

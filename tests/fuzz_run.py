@@ -10,14 +10,24 @@ one output folder, each sent SIGTERM, SIGINT or SIGKILL at a random moment of
 its run (most of them within the writing of the outputs): a pass when no
 traceback is printed, no temporary file is left (after a SIGKILL: once the next
 run has swept it) and the folder holds one complete set that matches its
-manifest, or the earlier one, or nothing.
+manifest, or the earlier one, or nothing, or (when an earlier SIGKILL left it
+so) a set its manifest marks incomplete.
+
+Each in-process case is timed (the count over 60 s and the longest are
+printed: a hang would show there). A SIGTERM that reaches this process while
+the in-process cases run is not taken by the command under test: a thread
+waits for it (``sigwaitinfo``) and the run prints who sent it (pid and
+command line), so an exit 143 can never go unexplained; a case that returns
+143 with no such SIGTERM recorded is a failure of its own.
 """
 
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
 import tempfile
+import threading
 import time
 from collections import Counter
 from pathlib import Path
@@ -27,23 +37,27 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from fuzz_cases import failure, make_cases, run_in_process  # noqa: E402
 
 
-def _set_state(out: Path) -> str:
-    """'absent', 'complete' (files match the manifest) or why the folder is not one set."""
+def _set_state(out: Path, pid: int | None = None) -> str:
+    """'absent', 'complete' (files match the manifest) or why the folder is not one set.
+
+    With ``pid``, the temporaries of other processes (a SIGKILLed earlier run's, which
+    the next run that writes sweeps) are not counted; the process's own are."""
     import hashlib
     import json
 
     if not out.exists():
         return "absent"
     temps = sorted(p.name for p in out.glob(".*.tmp"))
-    if temps:
-        return f"temporary files {temps}"
+    own = [t for t in temps if pid is None or f".{pid}." in t]
+    if own:
+        return f"temporary files {own}"
     try:
         manifest = json.loads((out / "outputs.json").read_text())
     except (OSError, ValueError) as exc:
         return f"no manifest ({exc})"
     if manifest.get("complete") is not True:
         return "manifest says incomplete"
-    names = sorted(p.name for p in out.iterdir())
+    names = sorted(p.name for p in out.iterdir() if p.name not in temps)
     if names != sorted([*manifest["files"], "outputs.json"]):
         return f"files {names} differ from the manifest"
     for name, entry in manifest["files"].items():
@@ -75,25 +89,34 @@ def signal_runs(n: int, seed: int, folder: Path) -> Counter[str]:
         sig = sigs[k % 3]
         # a quarter anywhere in the run, the rest from the moment a temporary appears
         when = "anytime" if rng.random() < 0.25 else "writing"
+        before = _set_state(out)
         proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                                 text=True, env=env)
         if when == "anytime":
             time.sleep(float(rng.uniform(0.0, duration * 1.1)))
         else:
             delay = float(rng.uniform(0.0, 0.05))
-            while proc.poll() is None and not list(out.glob(".*.tmp")):
+            while proc.poll() is None and not list(out.glob(f".*.{proc.pid}.*.tmp")):
                 time.sleep(0.001)
             time.sleep(delay)
         if proc.poll() is None:
             proc.send_signal(sig)
         _, stderr = proc.communicate(timeout=300)
-        state = _set_state(out)
+        state = _set_state(out, proc.pid)
+        if state == "complete" and _set_state(out) != "complete":
+            state = "complete, beside an earlier SIGKILL's temporaries"
         name = signal.Signals(sig).name
         if "Traceback" in stderr:
             counts[f"fail: traceback after {name}"] += 1
         elif sig == signal.SIGKILL and state != "complete" and state != "absent":
             counts[f"{name}: left for the next run ({state[:30]})"] += 1
-        elif state not in ("complete", "absent"):
+        elif sig != signal.SIGKILL and before not in ("complete", "absent") and (
+                state == "manifest says incomplete" or _set_state(out) == before):
+            # an earlier SIGKILL broke the set; this run, stopped, made it no worse (its own
+            # temporaries gone, the earlier ones swept if it got that far)
+            counts[f"{name} {when}: exit {proc.returncode}, still incomplete from the "
+                   f"earlier SIGKILL"] += 1
+        elif state not in ("complete", "absent"):  # "complete, beside ...": not swept
             counts[f"fail: {name} {when}: {state}"] += 1
         else:
             counts[f"{name} {when}: exit {proc.returncode}, set {state}"] += 1
@@ -101,6 +124,28 @@ def signal_runs(n: int, seed: int, folder: Path) -> Counter[str]:
     state = _set_state(out)
     counts[f"final run: exit {final.returncode}, set {state}"] += 1
     return counts
+
+
+def _sender(pid: int) -> str:
+    try:
+        with open(f"/proc/{pid}/cmdline", "rb") as fh:
+            return fh.read().replace(b"\0", b" ").decode(errors="replace").strip() or "?"
+    except OSError:
+        return "gone"
+
+
+def watch_sigterm(received: list[str]) -> None:
+    """Block SIGTERM in this thread and the ones it starts; a watcher thread records each
+    one that arrives, with its sender (call before any other thread starts)."""
+    signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGTERM})
+
+    def watch() -> None:
+        while True:
+            info = signal.sigwaitinfo({signal.SIGTERM})
+            received.append(f"SIGTERM from pid {info.si_pid} ({_sender(info.si_pid)}) "
+                            f"at {time.strftime('%H:%M:%S')}")
+
+    threading.Thread(target=watch, daemon=True, name="sigterm-watch").start()
 
 
 def main() -> int:
@@ -115,10 +160,19 @@ def main() -> int:
         outcomes: Counter[str] = Counter()
         by_family: Counter[tuple[str, str]] = Counter()
         failures = []
+        received: list[str] = []
+        watch_sigterm(received)
+        slow: list[tuple[float, str]] = []
         t0 = time.perf_counter()
         for case in cases:
+            before = len(received)
+            t_case = time.perf_counter()
             outcome = run_in_process(case)
+            slow.append((time.perf_counter() - t_case, f"{case.family} / {case.label}"))
             reason = failure(case, outcome)
+            if outcome.code == 143:
+                reason = (f"exit 143 after {received[before]}" if len(received) > before
+                          else "exit 143 with no SIGTERM received")
             kind = ("traceback" if outcome.traceback else f"exit {outcome.code}") if reason \
                 else ("refused (exit 2)" if outcome.code == 2 else f"read (exit {outcome.code})")
             outcomes["fail: " + reason if reason else kind] += 1
@@ -126,7 +180,14 @@ def main() -> int:
             if reason:
                 failures.append(f"{case.family} / {case.label}: {reason}")
         elapsed = time.perf_counter() - t0
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGTERM})  # the signalled runs
         print(f"{len(cases)} cases in {elapsed:.1f} s")
+        longest = max(slow)
+        print(f"  cases over 60 s: {sum(t > 60.0 for t, _ in slow)}; the longest "
+              f"{longest[0]:.1f} s ({longest[1]})")
+        print(f"  SIGTERM received by the runner: {len(received)}")
+        for line in received:
+            print(f"    {line}")
         for key, count in sorted(outcomes.items()):
             print(f"  {key}: {count}")
         for (family, result), count in sorted(by_family.items()):

@@ -122,6 +122,8 @@ class ViewerApp:
         self.progress_log: list[tuple[str, float]] = []
         self._tmpdir = tempfile.TemporaryDirectory(prefix="coronary3d-viewer-")
         self._busy = False
+        # Reconstruct's (memory GB, CPU s), as --max-memory-gb / --max-cpu-s; None: default
+        self.limits: tuple[float | None, float | None] = (None, None)
         self.layout = LAYOUTS[0]  # what the page shows: one of scene.LAYOUTS
         self.model: ModelNodes | None = None
         self.lesion: dict[str, float] | None = None  # lesion ends set by hand (mm), if any
@@ -576,7 +578,8 @@ class ViewerApp:
         return self.guard("Calibrate", client, run)
 
     def reconstruct(self, client: object | None = None) -> Reconstruction | None:
-        """Run recon.pipeline.reconstruct_pair on the marks; draw and tabulate the result."""
+        """Run recon.pipeline.reconstruct_pair on the marks (in a child process, under
+        ``self.limits``: recon.io.isolated); draw and tabulate the result."""
         if self._busy:
             self.notify("Busy", "a reconstruction is already running", "warning", client)
             return None
@@ -597,7 +600,8 @@ class ViewerApp:
                 h.body = f"{stage} ({fraction * 100:.0f} %)"
 
         def run() -> Reconstruction:
-            from recon.pipeline import ReconstructionOptions, reconstruct_pair
+            from recon.io.isolated import run_isolated
+            from recon.pipeline import ReconstructionOptions
 
             with self._lock:
                 seeds, segment = self._seeds_for_run()
@@ -610,8 +614,10 @@ class ViewerApp:
                 intensity_b=self.intensity["b"],
             )
             maps = (view_a.get_vesselness(), view_b.get_vesselness())  # cached for snapping
-            rec = reconstruct_pair(view_a.angio, view_b.angio, seeds, options,
-                                   progress=progress, vesselness=maps)
+            # in a process of its own, under the job's memory and CPU-time limits
+            rec = run_isolated("recon.io.isolated:reconstruct_limited",
+                               (view_a.angio, view_b.angio, seeds, options, maps, *self.limits),
+                               progress=progress)
             with self._lock:
                 self.reconstruction = rec
                 self.calibration = rec.calibration

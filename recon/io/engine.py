@@ -21,7 +21,15 @@ from pathlib import Path
 from typing import Any
 
 from recon.errors import CoronaryError
-from recon.io.batch import failed_record, read_record, run_case, write_case_folder, write_results
+from recon.io.batch import (
+    batch_lock,
+    failed_record,
+    read_record,
+    run_case,
+    sweep_leftovers,
+    write_case_folder,
+    write_results,
+)
 from recon.io.manifest import BatchCase
 
 __all__ = ["EngineError", "BatchSummary", "dask_client", "run_batch", "map_ordered"]
@@ -40,6 +48,7 @@ class BatchSummary:
     done: int = 0
     failed: int = 0
     dashboard: str | None = None
+    swept: list[str] = field(default_factory=list)
     records: list[dict] = field(default_factory=list)
     tables: list[Path] = field(default_factory=list)
 
@@ -88,6 +97,7 @@ def run_batch(
     retry_failed: bool = False,
     on_start: Callable[[BatchSummary, int], None] | None = None,
     on_case: Callable[[dict, int, int], None] | None = None,
+    limits: tuple[float | None, float | None] = (None, None),
 ) -> BatchSummary:
     """Run the cases that have no record yet (and the failed ones with ``retry_failed``).
 
@@ -95,10 +105,33 @@ def run_batch(
     dashboard address is in ``summary.dashboard``), ``on_case(record,
     completed, n_to_run)`` as each case completes. The results table
     (:func:`recon.io.batch.write_results`) covers every case of the
-    manifest that has a record.
+    manifest that has a record. ``limits`` is (``--max-memory-gb``,
+    ``--max-cpu-s``) of every case (None: the default for its image size).
+
+    The folder is held (:func:`recon.io.batch.batch_lock`) for the whole run,
+    and what a killed earlier run left in it is swept first
+    (:func:`recon.io.batch.sweep_leftovers`; their names in ``summary.swept``).
     """
     out_dir = Path(out_dir)
+    with batch_lock(out_dir):
+        return _run_batch(cases, out_dir, formats, sr, workers, scheduler, retry_failed,
+                          on_start, on_case, limits)
+
+
+def _run_batch(
+    cases: Sequence[BatchCase],
+    out_dir: Path,
+    formats: tuple[str, ...],
+    sr: bool,
+    workers: int | None,
+    scheduler: str | None,
+    retry_failed: bool,
+    on_start: Callable[[BatchSummary, int], None] | None,
+    on_case: Callable[[dict, int, int], None] | None,
+    limits: tuple[float | None, float | None],
+) -> BatchSummary:
     summary = BatchSummary()
+    summary.swept = sweep_leftovers(out_dir, [case.id for case in cases])
     todo: list[BatchCase] = []
     for case in cases:
         record = read_record(out_dir, case.id)
@@ -112,7 +145,7 @@ def run_batch(
             summary.dashboard = _dashboard(client)
             if on_start is not None:
                 on_start(summary, len(todo))
-            fresh = _run_on(client, todo, out_dir, formats, sr, on_case)
+            fresh = _run_on(client, todo, out_dir, formats, sr, limits, on_case)
     elif on_start is not None:
         on_start(summary, 0)
     summary.run = len(fresh)
@@ -126,11 +159,11 @@ def run_batch(
     return summary
 
 
-def _run_on(client, todo, out_dir, formats, sr, on_case) -> dict[str, dict]:
+def _run_on(client, todo, out_dir, formats, sr, limits, on_case) -> dict[str, dict]:
     from distributed import as_completed
 
     futures = {
-        client.submit(run_case, case, str(out_dir), formats, sr, key=f"case-{case.id}-{k}",
+        client.submit(run_case, case, str(out_dir), formats, sr, limits, key=f"case-{case.id}-{k}",
                       pure=False): case
         for k, case in enumerate(todo)
     }

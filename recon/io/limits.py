@@ -73,7 +73,7 @@ def _memory_message(what: str, limits: JobLimits) -> str:
 
 
 def _cpu_message(what: str, limits: JobLimits) -> str:
-    return f"{what} used more than its CPU-time limit of {limits.cpu_s:.0f} s (--max-cpu-s)"
+    return f"{what} used more than its CPU-time limit of {limits.cpu_s:g} s (--max-cpu-s)"
 
 
 def _watchdog(limits: JobLimits, what: str, data_cap: int | None, cpu_cap: float | None,
@@ -105,14 +105,17 @@ def job_limits(limits: JobLimits, what: str = "the reconstruction",
     """Run the block under ``limits``; reaching one raises :class:`LimitError`.
 
     ``RLIMIT_DATA`` counts the process's heap and private mappings (numpy's
-    arrays), so an allocation past it fails as a MemoryError; ``RLIMIT_CPU``
-    sends SIGXCPU when the process's CPU time passes the budget. Both soft
-    limits are put back when the block ends. Only the main thread can take
+    arrays), so an allocation past it fails as a MemoryError; a profiling
+    timer (``ITIMER_PROF``) sends SIGPROF when the process's CPU time (all
+    threads) passes the budget, to the fraction of a second, and
+    ``RLIMIT_CPU`` (whole seconds, SIGXCPU) is the backstop. The soft limits
+    and the timer are put back when the block ends. Only the main thread can take
     the signal; elsewhere the CPU limit is not applied.
     """
     old_data = resource.getrlimit(resource.RLIMIT_DATA)
     old_cpu = resource.getrlimit(resource.RLIMIT_CPU)
     old_handler: object = None
+    old_prof: object = None
     installed = False
     fired = False
     data_cap: int | None = None
@@ -136,8 +139,12 @@ def job_limits(limits: JobLimits, what: str = "the reconstruction",
     if limits.cpu_s is not None:
         with contextlib.suppress(ValueError):  # not the main thread
             old_handler = signal.signal(signal.SIGXCPU, on_xcpu)
+            old_prof = signal.signal(signal.SIGPROF, on_xcpu)
             installed = True
         if installed:
+            # the exact budget: SIGPROF after cpu_s of the process's CPU time (all threads);
+            # RLIMIT_CPU (whole seconds) is the backstop
+            signal.setitimer(signal.ITIMER_PROF, limits.cpu_s)
             usage = resource.getrusage(resource.RUSAGE_SELF)
             spent = usage.ru_utime + usage.ru_stime
             soft_cpu = int(spent + limits.cpu_s) + 1
@@ -157,13 +164,28 @@ def job_limits(limits: JobLimits, what: str = "the reconstruction",
         raise LimitError(_memory_message(what, limits)) from None
     except _CpuLimitReached:
         raise LimitError(_cpu_message(what, limits)) from None
+    except Exception as exc:  # a native library's own out-of-memory error (OpenCV's)
+        if limits.memory_bytes is None or not _allocation_failed(exc):
+            raise
+        raise LimitError(_memory_message(what, limits)) from None
     finally:
+        fired = True  # a timer that fires now, as the block ends, raises nothing
         done.set()
         resource.setrlimit(resource.RLIMIT_DATA, old_data)
         if installed:
+            signal.setitimer(signal.ITIMER_PROF, 0)
+            signal.signal(signal.SIGPROF, old_prof if old_prof is not None  # type: ignore
+                          else signal.SIG_DFL)
             resource.setrlimit(resource.RLIMIT_CPU, old_cpu)
             signal.signal(signal.SIGXCPU, old_handler if old_handler is not None  # type: ignore
                           else signal.SIG_DFL)
+
+
+def _allocation_failed(exc: Exception) -> bool:
+    """True for an error a native library raises when an allocation fails (OpenCV's
+    ``cv2.error`` "Insufficient memory", a C++ ``std::bad_alloc``)."""
+    text = str(exc)
+    return any(s in text for s in ("Insufficient memory", "Failed to allocate", "bad_alloc"))
 
 
 def _warm_blas() -> None:

@@ -15,6 +15,7 @@ from __future__ import annotations
 import csv
 import os
 import re
+import stat
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -23,6 +24,7 @@ from recon.errors import LoadError
 __all__ = ["REQUIRED_COLUMNS", "OPTIONAL_COLUMNS", "ManifestError", "BatchCase", "read_manifest"]
 
 REQUIRED_COLUMNS = ("id", "a", "b", "seeds")
+MAX_MANIFEST_BYTES = 64 * 2**20  # some 300 000 cases
 
 # column -> what its cell holds: "path" (relative to the manifest), "int", "bool",
 # or a tuple of the allowed words
@@ -67,6 +69,12 @@ def read_manifest(path: str | os.PathLike) -> list[BatchCase]:
     """Every case of a manifest, in its order; raises :class:`ManifestError`."""
     p = Path(path)
     try:
+        info = p.stat()
+        if not stat.S_ISREG(info.st_mode):  # a pipe or a device would never end
+            raise ManifestError(f"{p}: the manifest is not a regular file")
+        if info.st_size > MAX_MANIFEST_BYTES:
+            raise ManifestError(f"{p}: the manifest is {info.st_size / 1e6:.1f} MB; at most "
+                                f"{MAX_MANIFEST_BYTES // 2**20} MB is read")
         text = p.read_text(encoding="utf-8-sig")
     except OSError as exc:
         raise ManifestError(f"{p}: cannot read the manifest ({exc.strerror or exc})") from None

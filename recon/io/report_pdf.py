@@ -11,7 +11,6 @@ version and "research use only". No patient name, ID or date unless ``identify``
 from __future__ import annotations
 
 import io
-import os
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -19,12 +18,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from recon import __version__
-from recon.io.files import atomic_write_bytes
 
 if TYPE_CHECKING:
     from recon.pipeline import Reconstruction
 
-__all__ = ["report_figure", "report_pdf_bytes", "write_report_pdf"]
+__all__ = ["report_figure", "report_pdf_bytes"]
 
 A4_IN = (8.27, 11.69)
 
@@ -173,11 +171,3 @@ def report_pdf_bytes(rec: Reconstruction, image_a: NDArray, image_b: NDArray,
                                  "CreationDate": None}) as pdf:
         pdf.savefig(fig)
     return buf.getvalue()
-
-
-def write_report_pdf(path: str | os.PathLike, rec: Reconstruction, image_a: NDArray,
-                     image_b: NDArray, identify: bool = False) -> Path:
-    """Write report.pdf whole or not at all (OutputError naming the path)."""
-    data = report_pdf_bytes(rec, image_a, image_b, identify=identify)
-    atomic_write_bytes(path, data)
-    return Path(path)

@@ -342,3 +342,15 @@ def test_the_intensity_choice_of_each_view_reaches_the_reconstruction(app: Viewe
     assert rec.options.intensity_a == "auto" and rec.options.intensity_b == "log"
     report = rec.report()["intensity"]
     assert report["b"]["mapping"] == "log" and "set by the user" in report["b"]["reason"]
+
+
+def test_reconstruct_past_its_memory_limit_says_which_and_the_viewer_goes_on(
+        app: ViewerApp) -> None:
+    app.limits = (0.02, None)  # as --max-memory-gb 0.02
+    assert app.reconstruct() is None
+    level, title, body = app.notifications[-1]
+    assert (level, title) == ("error", "Reconstruct failed")
+    assert body.startswith("the reconstruction needed more memory than its limit of 0.02 GB "
+                           "(--max-memory-gb")
+    app.limits = (None, None)
+    assert app.reconstruct() is not None  # the server was not touched by the limit

@@ -155,3 +155,55 @@ def test_a_scheduler_and_two_workers_on_127_0_0_1(tmp_path):
                 p.wait(timeout=20)
             except subprocess.TimeoutExpired:
                 p.kill()
+
+
+def test_a_batch_case_past_its_cpu_limit_fails_saying_which_and_the_batch_goes_on(tmp_path):
+    manifest = _manifest(tmp_path, 2, [])
+    out = tmp_path / "out"
+    proc = run_cli("batch", str(manifest), "--out", str(out), "--max-cpu-s", "1")
+    assert proc.returncode == 0, proc.stderr
+    rows = _rows(out)
+    assert [r["status"] for r in rows] == ["failed", "failed"]
+    for row in rows:
+        assert row["error"] == ("the reconstruction used more than its CPU-time limit of 1 s "
+                                "(--max-cpu-s)")
+    assert "0 done, 2 failed" in proc.stderr  # one worker: it outlived both cases
+
+
+def test_a_tree_case_is_reconstructed_whole_with_a_row_per_branch(tmp_path):
+    import numpy as np
+
+    from recon.io.seeds_file import save_seeds
+    from recon.synth import make_phantom
+    from recon.synth.tree import tree_seeds
+
+    manifest = _manifest(tmp_path, 0, ["tree,inputs/a.dcm,inputs/b.dcm,inputs/tree.json,",
+                                       "side,inputs/a.dcm,inputs/b.dcm,inputs/tree.json,1",
+                                       "far,inputs/a.dcm,inputs/b.dcm,inputs/tree.json,5"])
+    text = manifest.read_text().replace("id,a,b,seeds", "id,a,b,seeds,segment")
+    manifest.write_text(text)
+    seeds, _, _ = tree_seeds(np.random.default_rng(1), make_phantom("static", 7, render=False))
+    save_seeds(seeds, tmp_path / "inputs" / "tree.json")
+    out = tmp_path / "out"
+    proc = run_cli("batch", str(manifest), "--out", str(out), "--workers", "2")
+    assert proc.returncode == 0, proc.stderr
+    rows = _rows(out)
+    assert [(r["id"], r["branch_id"], r["branch"], r["parent"]) for r in rows] == [
+        ("tree", "0", "main", ""), ("tree", "1", "branch 1", "main"),
+        ("side", "1", "branch 1", ""), ("far", "", "", ""),
+    ]
+    assert rows[3]["status"] == "failed" and "no segment 5" in rows[3]["error"]
+    report = json.loads((out / "tree" / "report.json").read_text())
+    assert [b["inputs"]["segment"] for b in report["branches"]] == ["main", "branch 1"]
+    assert report["bifurcations"][0]["gap_mm"] <= 0.1
+    for row, branch in zip(rows[:2], report["branches"], strict=True):
+        assert float(row["mld_mm"]) == branch["measurements"]["mld_mm"]
+        assert float(row["segment_length_mm"]) == branch["measurements"]["segment_length_mm"]
+    assert rows[0]["calibration_error_after_px"] == rows[1]["calibration_error_after_px"]
+    branch_ids = {int(v) for v in
+                  np.loadtxt(out / "tree" / "centerline.csv", delimiter=",", skiprows=1)[:, -1]}
+    assert branch_ids == {0, 1}
+    side = json.loads((out / "side" / "report.json").read_text())
+    assert "branches" not in side and side["inputs"]["segment"] == "branch 1"
+    assert [r["branch"] for r in pq.read_table(out / "results.parquet").to_pylist()] == \
+        ["main", "branch 1", "branch 1", None]

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import resource
+import time
 from pathlib import Path
 
 import numpy as np
@@ -44,3 +45,25 @@ def test_reconstruct_past_its_cpu_limit_says_which(tmp_path: Path) -> None:
     proc = run_cli("reconstruct", "--demo", "--out", str(out), "--quiet", "--max-cpu-s", "1")
     assert_one_line_error(proc, "--max-cpu-s", "CPU-time limit of 1 s")
     assert not out.exists()
+
+
+def _cpu_s() -> float:
+    usage = resource.getrusage(resource.RUSAGE_SELF)
+    return usage.ru_utime + usage.ru_stime
+
+
+def test_the_cpu_limit_holds_to_a_fraction_of_a_second() -> None:
+    """RLIMIT_CPU counts whole seconds (1 s could let 2 s through); the timer does not."""
+    start = _cpu_s()
+    with pytest.raises(LimitError, match=r"CPU-time limit of 0\.3 s \(--max-cpu-s\)$"):
+        with job_limits(limits_for(1, memory_gb=0, cpu_s=0.3), "the test"):
+            a = np.random.default_rng(0).random((200, 200))
+            while _cpu_s() - start < 5.0:
+                a = np.tanh(a @ a.T / 200.0)
+    assert 0.25 <= _cpu_s() - start < 0.8  # the timer and getrusage tick apart a little
+    time.sleep(0.05)
+    with job_limits(limits_for(1, memory_gb=0, cpu_s=0.3), "the test"):
+        pass  # a block that ends in time: no timer left behind
+    t0 = _cpu_s()
+    while _cpu_s() - t0 < 0.5:  # past the old budget, outside the block: nothing fires
+        np.tanh(np.ones(10000))

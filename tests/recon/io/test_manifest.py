@@ -63,3 +63,20 @@ def test_a_bad_manifest_is_one_line_naming_it(tmp_path, text, fragment):
 def test_a_missing_manifest(tmp_path):
     with pytest.raises(ManifestError, match=r"nope\.csv: cannot read the manifest"):
         read_manifest(tmp_path / "nope.csv")
+
+
+def test_a_named_pipe_or_a_huge_file_is_refused_without_reading_it(tmp_path):
+    import os
+
+    from support import assert_one_line_error, run_cli
+
+    fifo = tmp_path / "manifest.csv"
+    os.mkfifo(fifo)  # reading it would wait for a writer forever
+    proc = run_cli("batch", str(fifo), "--out", str(tmp_path / "out"))
+    assert_one_line_error(proc, str(fifo), "the manifest is not a regular file")
+    assert not (tmp_path / "out").exists()
+    big = tmp_path / "big.csv"
+    with big.open("wb") as fh:
+        fh.truncate(65 * 2**20)  # sparse: 65 MB that take no disk
+    with pytest.raises(ManifestError, match=r"big\.csv: the manifest is 68\.2 MB; at most 64 MB"):
+        read_manifest(big)

@@ -43,9 +43,22 @@ def test_the_page_says_what_a_clinician_needs_and_no_patient_data(case) -> None:
     assert all(p in shown for p in private)  # asked for with --identify
 
 
-def test_written_whole(case, tmp_path) -> None:
-    from recon.io.report_pdf import write_report_pdf
+def test_written_whole_as_part_of_the_output_set(case, tmp_path) -> None:
+    """The command line's path: report_pdf_bytes, then write_outputs(extra=...)."""
+    import hashlib
+    import json
+
+    from recon.io.outputs import write_outputs
+    from recon.io.report_pdf import report_pdf_bytes
 
     rec, a, b = case
-    path = write_report_pdf(tmp_path / "sub" / "report.pdf", rec, a.image, b.image)
-    assert path.read_bytes().startswith(b"%PDF") and path.stat().st_size > 10_000
+    out = tmp_path / "sub"
+    written = write_outputs(rec, out, extra={"report.pdf": report_pdf_bytes(rec, a.image,
+                                                                            b.image)})
+    pdf = out / "report.pdf"
+    assert pdf in written
+    data = pdf.read_bytes()
+    assert data.startswith(b"%PDF") and data.rstrip().endswith(b"%%EOF") and len(data) > 10_000
+    manifest = json.loads((out / "outputs.json").read_text())
+    assert manifest["complete"] is True
+    assert manifest["files"]["report.pdf"]["sha256"] == hashlib.sha256(data).hexdigest()

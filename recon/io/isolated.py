@@ -1,0 +1,206 @@
+"""One job in a child process of its own, so that its limits apply in full.
+
+The memory and CPU-time limits of :mod:`recon.io.limits` are process-wide
+(``RLIMIT_DATA``, ``RLIMIT_CPU``) and the CPU limit needs the main thread;
+a Dask worker runs its task in a worker thread, and the viewer runs
+Reconstruct in a server thread. :func:`run_isolated` runs a job in a fresh
+interpreter (``python -m recon.io.isolated``), in whose main thread
+:func:`recon.io.limits.job_limits` works exactly as for ``coronary3d
+reconstruct``, including the watchdog that ends a process stuck at a limit
+in native code; reaching a limit ends only the child, never the worker or
+the viewer.
+
+The parent sends ``(target, args)`` (``target`` is "module:function") as a
+pickle on the child's stdin; the child sends back pickled frames on its
+stdout: ``("progress", stage, fraction)`` for each progress call, then
+``("result", value)`` or ``("error", kind, class path, message)``. A child
+that ends without a frame (the limit watchdog, a kill) is told apart by its
+exit status and last stderr line. Pickles pass only between this process
+and the child it started.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import importlib
+import os
+import pickle
+import signal
+import struct
+import subprocess
+import sys
+import threading
+from collections.abc import Callable
+from typing import IO, TYPE_CHECKING, Any
+
+from recon.errors import CoronaryError
+from recon.io.limits import LimitError
+
+if TYPE_CHECKING:
+    from recon.centerline import VesselnessMap
+    from recon.pipeline import Reconstruction, ReconstructionOptions
+    from recon.seeds import Seeds
+    from recon.types import Angiogram
+
+__all__ = ["JobFailed", "run_isolated", "reconstruct_limited"]
+
+Progress = Callable[[str, float], None]
+_HEADER = struct.Struct("!Q")  # the length of each frame's pickle
+
+
+class JobFailed(Exception):
+    """An error that is not the project's (a bug) inside the child: its type and message."""
+
+    def __init__(self, type_name: str, message: str) -> None:
+        super().__init__(f"{type_name}: {message}")
+        self.type_name = type_name
+        self.message = message
+
+
+def run_isolated(target: str, args: tuple, progress: Progress | None = None,
+                 what: str = "the reconstruction") -> Any:
+    """``target(*args)`` ("module:function") computed in a child process; its value.
+
+    The function gets a ``progress`` keyword when ``progress`` is given (its
+    calls are relayed here). A :class:`~recon.errors.CoronaryError` in the
+    child is raised here as the same class with the same one line (a limit
+    reached is a :class:`~recon.io.limits.LimitError` saying which); another
+    exception is a :class:`JobFailed`; a child killed by a signal is a
+    :class:`CoronaryError` naming ``what`` and the signal.
+    """
+    env = dict(os.environ)
+    env.pop("CORONARY3D_DEBUG", None)
+    proc = subprocess.Popen([sys.executable, "-m", "recon.io.isolated"],
+                            stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, env=env)
+    stderr_lines: list[bytes] = []
+    reader = threading.Thread(target=_collect, args=(proc.stderr, stderr_lines), daemon=True)
+    reader.start()
+    outcome: tuple | None = None
+    try:
+        with contextlib.suppress(BrokenPipeError):  # a child that died at once
+            proc.stdin.write(pickle.dumps((target, args, progress is not None)))
+            proc.stdin.close()
+        while outcome is None:
+            frame = _read_frame(proc.stdout)
+            if frame is None:
+                break
+            if frame[0] == "progress":
+                if progress is not None:
+                    progress(frame[1], frame[2])
+            else:
+                outcome = frame
+    except BaseException:
+        proc.kill()
+        raise
+    finally:
+        code = proc.wait()
+        reader.join(timeout=5.0)
+        proc.stdout.close()
+    if outcome is not None and outcome[0] == "result":
+        return outcome[1]
+    if outcome is not None:
+        _, kind, cls_path, message = outcome
+        if kind == "coronary":
+            raise _project_error(cls_path, message)
+        raise JobFailed(cls_path, message)
+    last = next((ln.decode(errors="replace").strip() for ln in reversed(stderr_lines)
+                 if ln.strip()), "")
+    prefix = "coronary3d: error: "
+    if code == 2 and last.startswith(prefix):  # the limits watchdog's line
+        raise LimitError(last[len(prefix):])
+    if code < 0:
+        name = signal.Signals(-code).name if -code in signal.Signals._value2member_map_ \
+            else str(-code)
+        extra = " (the system may have run out of memory)" if -code == signal.SIGKILL else ""
+        raise CoronaryError(f"{what} was ended by {name}{extra}")
+    raise CoronaryError(f"{what} ended with exit code {code}" + (f": {last}" if last else ""))
+
+
+def _project_error(cls_path: str, message: str) -> CoronaryError:
+    module, _, name = cls_path.rpartition(".")
+    try:
+        cls = getattr(importlib.import_module(module), name)
+        if isinstance(cls, type) and issubclass(cls, CoronaryError):
+            return cls(message)
+    except Exception:  # noqa: BLE001 - any class that cannot be rebuilt is the base class
+        pass
+    return CoronaryError(message)
+
+
+def _collect(stream: IO[bytes], lines: list[bytes]) -> None:
+    for line in stream:
+        lines.append(line)
+        del lines[:-20]  # the last lines say why a child ended
+    stream.close()
+
+
+def _read_frame(stream: IO[bytes]) -> tuple | None:
+    head = stream.read(_HEADER.size)
+    if len(head) < _HEADER.size:
+        return None
+    (size,) = _HEADER.unpack(head)
+    body = stream.read(size)
+    if len(body) < size:
+        return None
+    return pickle.loads(body)
+
+
+def _write_frame(stream: IO[bytes], frame: tuple) -> None:
+    body = pickle.dumps(frame, protocol=pickle.HIGHEST_PROTOCOL)
+    stream.write(_HEADER.pack(len(body)) + body)
+    stream.flush()
+
+
+def _die_with_parent() -> None:
+    """Ask Linux to end this child when its parent dies (a killed worker leaves no orphan)."""
+    with contextlib.suppress(Exception):
+        import ctypes
+
+        pr_set_pdeathsig = 1
+        ctypes.CDLL("libc.so.6", use_errno=True).prctl(pr_set_pdeathsig, signal.SIGKILL)
+
+
+def _child() -> int:
+    _die_with_parent()
+    frames = os.fdopen(os.dup(1), "wb")  # the frames' channel; stray prints go to stderr
+    os.dup2(2, 1)
+    target, args, wants_progress = pickle.loads(sys.stdin.buffer.read())
+    kwargs = {}
+    if wants_progress:
+        kwargs["progress"] = lambda stage, fraction: _write_frame(
+            frames, ("progress", str(stage), float(fraction)))
+    try:
+        module, _, name = target.partition(":")
+        value = getattr(importlib.import_module(module), name)(*args, **kwargs)
+    except CoronaryError as exc:
+        cls = type(exc)
+        _write_frame(frames, ("error", "coronary", f"{cls.__module__}.{cls.__qualname__}",
+                              " ".join(str(exc).split())))
+        return 2
+    except Exception as exc:  # noqa: BLE001 - reported to the parent, which decides
+        _write_frame(frames, ("error", "internal", type(exc).__name__,
+                              " ".join(str(exc).split())))
+        return 1
+    _write_frame(frames, ("result", value))
+    return 0
+
+
+def reconstruct_limited(angio_a: Angiogram, angio_b: Angiogram, seeds: Seeds,
+                        options: ReconstructionOptions,
+                        vesselness: tuple[VesselnessMap, VesselnessMap] | None = None,
+                        memory_gb: float | None = None, cpu_s: float | None = None,
+                        progress: Progress | None = None) -> Reconstruction:
+    """``reconstruct_pair`` under the job's limits (for views of this size, or the ones
+    given): the viewer's Reconstruct, through :func:`run_isolated`."""
+    from recon.io.limits import job_limits, limits_for
+    from recon.pipeline import reconstruct_pair
+
+    pixels = max(angio_a.image.size, angio_b.image.size)
+    with job_limits(limits_for(pixels, memory_gb, cpu_s), hard_exit=True):
+        return reconstruct_pair(angio_a, angio_b, seeds, options, progress=progress,
+                                vesselness=vesselness)
+
+
+if __name__ == "__main__":
+    sys.exit(_child())
