@@ -9,14 +9,15 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import importlib
 import json
-import math
 import os
 import sys
 import time
 from collections.abc import Sequence
 from pathlib import Path
 
+from recon.cli_inputs import number_arg as _number
 from recon.errors import CoronaryError
 from recon.startup import cap_math_threads
 
@@ -34,37 +35,6 @@ class _Parser(argparse.ArgumentParser):
     def error(self, message: str) -> None:  # type: ignore[override]
         text = " ".join(message.split())
         self.exit(EXIT_USER_ERROR, f"coronary3d: error: {text} (see {self.prog} --help)\n")
-
-
-def _number(kind: type, low: float | None = None, high: float | None = None,
-            below_high: bool = False):
-    """An argparse type: a finite ``kind`` (int or float) in [low, high] (or
-    [low, high) when ``below_high``), refused in one line otherwise."""
-
-    def parse(text: str):
-        try:
-            value = kind(text)
-        except (TypeError, ValueError):
-            raise argparse.ArgumentTypeError(
-                f"{text!r} is not {'an integer' if kind is int else 'a number'}"
-            ) from None
-        if kind is float and not math.isfinite(value):
-            raise argparse.ArgumentTypeError(f"{text!r} is not a finite number")
-        top_ok = high is None or (value < high if below_high else value <= high)
-        if (low is not None and value < low) or not top_ok:
-            lo = "" if low is None else f"{low:g}" if kind is float else str(low)
-            hi = "" if high is None else f"{high:g}" if kind is float else str(high)
-            if high is None:
-                span = f"at least {lo}"
-            elif below_high:
-                span = f"from {lo} to below {hi}"
-            else:
-                span = f"from {lo} to {hi}"
-            raise argparse.ArgumentTypeError(f"{text} is out of range ({span})")
-        return value
-
-    parse.__name__ = kind.__name__
-    return parse
 
 
 def _folder(text: str) -> str:
@@ -600,19 +570,18 @@ def cmd_view(args: argparse.Namespace) -> int:
 
 
 def cmd_bench(args: argparse.Namespace) -> int:
-    import importlib
-
     module = importlib.import_module(f"recon.bench.{args.name.replace('-', '_')}")
     extra = {}
     if args.suite == "tree" and args.name != "reconstruct":
         print(f"coronary3d: error: bench {args.name} has no --suite tree (reconstruct has)",
               file=sys.stderr)
         return EXIT_USER_ERROR
-    if args.name in ("centerline", "reconstruct", "calibration-modes"):
+    suites = ("centerline", "reconstruct", "calibration-modes")
+    if args.name in suites:
         extra["suite"] = args.suite
     elif args.suite != "regular":
         print(f"coronary3d: error: bench {args.name} has no --suite {args.suite} "
-              "(centerline and reconstruct have)", file=sys.stderr)
+              f"({', '.join(suites)} have)", file=sys.stderr)
         return EXIT_USER_ERROR
     if args.jitter:
         if args.name != "reconstruct" or args.jitter < 0:
@@ -621,10 +590,10 @@ def cmd_bench(args: argparse.Namespace) -> int:
             return EXIT_USER_ERROR
         extra["jitter"] = args.jitter
     if args.workers is not None:
-        if args.workers < 1 or not (args.name == "calibration-modes" or (
-                args.name in ("reconstruct", "intervals") and args.suite == "regular")):
-            print("coronary3d: error: --workers N (N >= 1) is for bench reconstruct "
-                  "(regular suite) and bench intervals", file=sys.stderr)
+        if args.workers < 1 or not (args.name in ("intervals", "calibration-modes") or (
+                args.name == "reconstruct" and args.suite == "regular")):
+            print("coronary3d: error: --workers N (N >= 1) is for bench reconstruct (regular "
+                  "suite), intervals and calibration-modes", file=sys.stderr)
             return EXIT_USER_ERROR
         extra["workers"] = args.workers
     result = module.run(cases=args.cases, seed=args.seed, **extra)

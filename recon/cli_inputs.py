@@ -1,11 +1,14 @@
-"""What `coronary3d reconstruct` reads: the files no output may replace, and --segment."""
+"""What the command line reads: finite numbers in range (every numeric option), the files
+no output of `coronary3d reconstruct` may replace, and its --segment."""
 
 from __future__ import annotations
 
+import argparse
+import math
 import os
 from pathlib import Path
 
-__all__ = ["segment_choice", "file_bytes", "input_files"]
+__all__ = ["number_arg", "segment_choice", "file_bytes", "input_files"]
 
 
 def segment_choice(text: str | None, seeds, seeds_path: str) -> int | None:
@@ -44,3 +47,34 @@ def input_files(file_a: str, file_b: str, seeds: str, geometry_json: str | None,
         if sidecar != Path(path):
             found.append((f"geometry JSON of file {role}", str(sidecar)))
     return found
+
+
+def number_arg(kind: type, low: float | None = None, high: float | None = None,
+            below_high: bool = False):
+    """An argparse type: a finite ``kind`` (int or float) in [low, high] (or
+    [low, high) when ``below_high``), refused in one line otherwise."""
+
+    def parse(text: str):
+        try:
+            value = kind(text)
+        except (TypeError, ValueError):
+            raise argparse.ArgumentTypeError(
+                f"{text!r} is not {'an integer' if kind is int else 'a number'}"
+            ) from None
+        if kind is float and not math.isfinite(value):
+            raise argparse.ArgumentTypeError(f"{text!r} is not a finite number")
+        top_ok = high is None or (value < high if below_high else value <= high)
+        if (low is not None and value < low) or not top_ok:
+            lo = "" if low is None else f"{low:g}" if kind is float else str(low)
+            hi = "" if high is None else f"{high:g}" if kind is float else str(high)
+            if high is None:
+                span = f"at least {lo}"
+            elif below_high:
+                span = f"from {lo} to below {hi}"
+            else:
+                span = f"from {lo} to {hi}"
+            raise argparse.ArgumentTypeError(f"{text} is out of range ({span})")
+        return value
+
+    parse.__name__ = kind.__name__
+    return parse

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import contextlib
 import io
-import json
 import logging
 import re
 import tempfile
@@ -29,11 +28,9 @@ from numpy.typing import NDArray
 
 from recon.errors import LoadError, OutputError
 from recon.io import (
-    MESH_FORMATS,
     demo_paths,
     load_angiogram,
     load_seeds,
-    outputs_as_bytes,
     save_seeds,
 )
 from recon.seeds import Seeds
@@ -42,6 +39,7 @@ from viewer_app import scene
 from viewer_app.access import PATCHED_VISER_VERSION, FileAccess, ServerGuard, guarded_serve
 from viewer_app.camera import PageCameras
 from viewer_app.catheter import CatheterTool
+from viewer_app.exports import EXPORT_KINDS, export_bytes, export_name
 from viewer_app.panels import Panels, build_panels
 from viewer_app.results import close_views_warning
 from viewer_app.scene import LAYOUTS, ModelNodes, View
@@ -62,7 +60,6 @@ __all__ = ["ViewerApp", "EXPORT_KINDS"]
 log = logging.getLogger(__name__)
 
 SNAP_MAX_PX = 8.0
-EXPORT_KINDS = (*MESH_FORMATS, "centerline.csv", "report.json", "seeds.json")
 
 FloatArray = NDArray[np.float64]
 
@@ -676,28 +673,14 @@ class ViewerApp:
 
     # ================================================================ export
     def export(self, kind: str) -> bytes:
-        """Bytes of an output: a mesh format ("stl", "obj", "ply", "glb"),
-        "centerline.csv", "report.json" or "seeds.json" (the marks; needs no reconstruction).
-
-        Raises ValueError when there is no reconstruction yet or the kind is unknown.
-        """
-        if kind not in EXPORT_KINDS:
-            raise ValueError(f"export: unknown kind {kind!r} (one of {', '.join(EXPORT_KINDS)})")
-        if kind == "seeds.json":
-            return (json.dumps(self.seeds().to_dict(), indent=2) + "\n").encode()
-        rec = self.reconstruction
-        if rec is None:
-            raise ValueError(f"export {kind}: reconstruct first")
-        fmt = kind if kind in MESH_FORMATS else "stl"
-        files = outputs_as_bytes(rec, formats=(fmt,))
-        return files[f"mesh.{kind}" if kind in MESH_FORMATS else kind]
+        """Bytes of an output (:func:`viewer_app.exports.export_bytes`)."""
+        return export_bytes(kind, self.reconstruction, self.seeds())
 
     def download(self, kind: str, client: object | None = None) -> None:
         """Send an export to the browser (a file download)."""
 
         def run() -> None:
-            data = self.export(kind)
-            name = f"mesh.{kind}" if kind in MESH_FORMATS else kind
+            data, name = self.export(kind), export_name(kind)
             targets = [client] if client is not None else list(self.server.get_clients().values())
             for c in targets:
                 c.send_file_download(name, data, save_immediately=True)

@@ -7,6 +7,7 @@ import threading
 from collections.abc import Callable
 from pathlib import Path
 
+from recon.io.isolated import start_fork_server
 from recon.io.overrides import GeometryOverrides, header_replacements
 from viewer_app.app import ViewerApp
 
@@ -43,6 +44,8 @@ def run_viewer(
         for note in header_replacements(v.angio.geometry_notes):
             log.warning("%s: %s", v.display_name, note)
             app.notify("Header value replaced", f"{v.key.upper()}: {note}", "warning")
+    # Reconstruct runs in a child forked from a server that has the pipeline imported
+    threading.Thread(target=start_fork_server, daemon=True).start()
     if on_ready is not None:
         on_ready(app.url)
     stop = stop_event or threading.Event()

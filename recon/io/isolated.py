@@ -3,26 +3,29 @@
 The memory and CPU-time limits of :mod:`recon.io.limits` are process-wide
 (``RLIMIT_DATA``, ``RLIMIT_CPU``) and the CPU limit needs the main thread;
 a Dask worker runs its task in a worker thread, and the viewer runs
-Reconstruct in a server thread. :func:`run_isolated` runs a job in a fresh
-interpreter (``python -m recon.io.isolated``), in whose main thread
+Reconstruct in a server thread. :func:`run_isolated` runs a job in a child
+forked, for that job alone, from a multiprocessing fork server (a
+single-threaded process started once, with the pipeline already imported,
+so a job does not pay the ~1.2 s of imports). In the child's main thread
 :func:`recon.io.limits.job_limits` works exactly as for ``coronary3d
 reconstruct``, including the watchdog that ends a process stuck at a limit
 in native code; reaching a limit ends only the child, never the worker or
 the viewer.
 
-The parent sends ``(target, args)`` (``target`` is "module:function") as a
-pickle on the child's stdin; the child sends back pickled frames on its
-stdout: ``("progress", stage, fraction)`` for each progress call, then
-``("result", value)`` or ``("error", kind, class path, message)``. A child
-that ends without a frame (the limit watchdog, a kill) is told apart by its
-exit status and last stderr line. Pickles pass only between this process
-and the child it started.
+The parent sends ``(target, args)`` (``target`` is "module:function"); the
+child sends back frames on a pipe: ``("progress", stage, fraction)`` for
+each progress call, then ``("result", value)`` or ``("error", kind, class
+path, message)``. Its standard error goes to a second pipe, so a child that
+ends without a frame (the limit watchdog, a kill) is told apart by its exit
+status and last stderr line. Pickles pass only between this process and the
+children it started.
 """
 
 from __future__ import annotations
 
 import contextlib
 import importlib
+import multiprocessing
 import os
 import pickle
 import signal
@@ -42,10 +45,10 @@ if TYPE_CHECKING:
     from recon.seeds import Seeds
     from recon.types import Angiogram
 
-__all__ = ["JobFailed", "run_isolated", "reconstruct_limited"]
+__all__ = ["JobFailed", "run_isolated", "start_fork_server", "reconstruct_limited"]
 
 Progress = Callable[[str, float], None]
-_HEADER = struct.Struct("!Q")  # the length of each frame's pickle
+_HEADER = struct.Struct("!Q")  # the length of each frame's pickle (fresh interpreter)
 
 
 class JobFailed(Exception):
@@ -68,13 +71,78 @@ def run_isolated(target: str, args: tuple, progress: Progress | None = None,
     exception is a :class:`JobFailed`; a child killed by a signal is a
     :class:`CoronaryError` naming ``what`` and the signal.
     """
+    if multiprocessing.current_process().daemon:
+        return _run_fresh(target, args, progress, what)
+    ctx = _fork_server()
+    frames_in, frames_out = ctx.Pipe(duplex=False)
+    err_in, err_out = ctx.Pipe(duplex=False)
+    proc = ctx.Process(target=_child, args=(frames_out, err_out, target, args,
+                                            progress is not None), daemon=True)
+    stderr_lines: list[bytes] = []
+    reader = threading.Thread(target=_collect, args=(err_in, stderr_lines), daemon=True)
+    outcome: tuple | None = None
+    try:
+        proc.start()
+        frames_out.close()
+        err_out.close()
+        reader.start()
+        while outcome is None:
+            try:
+                frame = frames_in.recv()
+            except (EOFError, OSError):
+                break
+            if frame[0] == "progress":
+                if progress is not None:
+                    progress(frame[1], frame[2])
+            else:
+                outcome = frame
+    except BaseException:
+        if proc.pid is not None:
+            proc.kill()
+        raise
+    finally:
+        if proc.pid is not None:
+            proc.join()
+        frames_in.close()
+    reader.join(timeout=5.0)
+    code = proc.exitcode if proc.exitcode is not None else 1
+    return _outcome(outcome, code, stderr_lines, what)
+
+
+def _outcome(outcome: tuple | None, code: int, stderr_lines: list[bytes], what: str) -> Any:
+    """The job's value, or its error raised, from its last frame, exit status and stderr."""
+    if outcome is not None and outcome[0] == "result":
+        return outcome[1]
+    if outcome is not None:
+        _, kind, cls_path, message = outcome
+        if kind == "coronary":
+            raise _project_error(cls_path, message)
+        raise JobFailed(cls_path, message)
+    last = next((ln.decode(errors="replace").strip() for ln in reversed(stderr_lines)
+                 if ln.strip()), "")
+    prefix = "coronary3d: error: "
+    if code == 2 and last.startswith(prefix):  # the limits watchdog's line
+        raise LimitError(last[len(prefix):])
+    if code < 0:
+        name = signal.Signals(-code).name if -code in signal.Signals._value2member_map_ \
+            else str(-code)
+        extra = " (the system may have run out of memory)" if -code == signal.SIGKILL else ""
+        raise CoronaryError(f"{what} was ended by {name}{extra}")
+    raise CoronaryError(f"{what} ended with exit code {code}" + (f": {last}" if last else ""))
+
+
+def _run_fresh(target: str, args: tuple, progress: Progress | None,
+               what: str) -> Any:
+    """:func:`run_isolated` in a fresh interpreter (``python -m recon.io.isolated``), for
+    a daemonic process (a Dask worker), which may not start a fork server."""
     env = dict(os.environ)
     env.pop("CORONARY3D_DEBUG", None)
     proc = subprocess.Popen([sys.executable, "-m", "recon.io.isolated"],
                             stdin=subprocess.PIPE, stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, env=env)
     stderr_lines: list[bytes] = []
-    reader = threading.Thread(target=_collect, args=(proc.stderr, stderr_lines), daemon=True)
+    reader = threading.Thread(target=_collect_stream, args=(proc.stderr, stderr_lines),
+                              daemon=True)
     reader.start()
     outcome: tuple | None = None
     try:
@@ -97,24 +165,30 @@ def run_isolated(target: str, args: tuple, progress: Progress | None = None,
         code = proc.wait()
         reader.join(timeout=5.0)
         proc.stdout.close()
-    if outcome is not None and outcome[0] == "result":
-        return outcome[1]
-    if outcome is not None:
-        _, kind, cls_path, message = outcome
-        if kind == "coronary":
-            raise _project_error(cls_path, message)
-        raise JobFailed(cls_path, message)
-    last = next((ln.decode(errors="replace").strip() for ln in reversed(stderr_lines)
-                 if ln.strip()), "")
-    prefix = "coronary3d: error: "
-    if code == 2 and last.startswith(prefix):  # the limits watchdog's line
-        raise LimitError(last[len(prefix):])
-    if code < 0:
-        name = signal.Signals(-code).name if -code in signal.Signals._value2member_map_ \
-            else str(-code)
-        extra = " (the system may have run out of memory)" if -code == signal.SIGKILL else ""
-        raise CoronaryError(f"{what} was ended by {name}{extra}")
-    raise CoronaryError(f"{what} ended with exit code {code}" + (f": {last}" if last else ""))
+    return _outcome(outcome, code, stderr_lines, what)
+
+
+_SERVER: list = []  # the multiprocessing context of this process's fork server, once made
+
+
+def start_fork_server() -> None:
+    """Start the fork server now (it takes about a second, the imports), so that the
+    first :func:`run_isolated` does not wait for it; nothing in a daemonic process."""
+    if not multiprocessing.current_process().daemon:
+        from multiprocessing import forkserver
+
+        _fork_server()
+        forkserver.ensure_running()
+
+
+def _fork_server() -> Any:
+    """The "forkserver" multiprocessing context, its server preloading the pipeline."""
+    if not _SERVER:
+        ctx = multiprocessing.get_context("forkserver")
+        ctx.set_forkserver_preload(["recon.io.isolated", "recon.pipeline",
+                                    "recon.io.limits"])
+        _SERVER.append(ctx)
+    return _SERVER[0]
 
 
 def _project_error(cls_path: str, message: str) -> CoronaryError:
@@ -128,7 +202,27 @@ def _project_error(cls_path: str, message: str) -> CoronaryError:
     return CoronaryError(message)
 
 
-def _collect(stream: IO[bytes], lines: list[bytes]) -> None:
+def _collect(conn: Any, lines: list[bytes]) -> None:
+    """The last lines a child wrote to its standard error (``conn``: the pipe's end)."""
+    pending = b""
+    fd = conn.fileno()
+    while True:
+        try:
+            chunk = os.read(fd, 65536)
+        except OSError:
+            break
+        if not chunk:
+            break
+        pending += chunk
+        *done, pending = pending.split(b"\n")
+        lines.extend(done)
+        del lines[:-20]  # the last lines say why a child ended
+    if pending:
+        lines.append(pending)
+    conn.close()
+
+
+def _collect_stream(stream: IO[bytes], lines: list[bytes]) -> None:
     for line in stream:
         lines.append(line)
         del lines[:-20]  # the last lines say why a child ended
@@ -161,29 +255,47 @@ def _die_with_parent() -> None:
         ctypes.CDLL("libc.so.6", use_errno=True).prctl(pr_set_pdeathsig, signal.SIGKILL)
 
 
-def _child() -> int:
-    _die_with_parent()
-    frames = os.fdopen(os.dup(1), "wb")  # the frames' channel; stray prints go to stderr
-    os.dup2(2, 1)
-    target, args, wants_progress = pickle.loads(sys.stdin.buffer.read())
+def _run_target(target: str, args: tuple, wants_progress: bool,
+                send: Callable[[tuple], None]) -> int:
+    """Run ``target(*args)`` in a child and ``send`` its frames; the exit status (0 done,
+    2 after a project error, 1 after another)."""
     kwargs = {}
     if wants_progress:
-        kwargs["progress"] = lambda stage, fraction: _write_frame(
-            frames, ("progress", str(stage), float(fraction)))
+        kwargs["progress"] = lambda stage, fraction: send(
+            ("progress", str(stage), float(fraction)))
     try:
         module, _, name = target.partition(":")
         value = getattr(importlib.import_module(module), name)(*args, **kwargs)
     except CoronaryError as exc:
         cls = type(exc)
-        _write_frame(frames, ("error", "coronary", f"{cls.__module__}.{cls.__qualname__}",
-                              " ".join(str(exc).split())))
+        send(("error", "coronary", f"{cls.__module__}.{cls.__qualname__}",
+              " ".join(str(exc).split())))
         return 2
     except Exception as exc:  # noqa: BLE001 - reported to the parent, which decides
-        _write_frame(frames, ("error", "internal", type(exc).__name__,
-                              " ".join(str(exc).split())))
+        send(("error", "internal", type(exc).__name__, " ".join(str(exc).split())))
         return 1
-    _write_frame(frames, ("result", value))
+    send(("result", value))
     return 0
+
+
+def _child(frames: Any, err: Any, target: str, args: tuple, wants_progress: bool) -> None:
+    """A forked child's main (``frames``, ``err``: the pipes' ends)."""
+    _die_with_parent()
+    os.dup2(err.fileno(), 2)  # standard error (the limit watchdog's line) to the parent
+    os.dup2(2, 1)  # stray prints too
+    code = _run_target(target, args, wants_progress, frames.send)
+    sys.stderr.flush()
+    if code:
+        os._exit(code)
+
+
+def _fresh_child() -> int:
+    """A fresh interpreter's main: the job on stdin, the frames on stdout."""
+    _die_with_parent()
+    frames = os.fdopen(os.dup(1), "wb")  # the frames' channel; stray prints go to stderr
+    os.dup2(2, 1)
+    target, args, wants_progress = pickle.loads(sys.stdin.buffer.read())
+    return _run_target(target, args, wants_progress, lambda f: _write_frame(frames, f))
 
 
 def reconstruct_limited(angio_a: Angiogram, angio_b: Angiogram, seeds: Seeds,
@@ -203,4 +315,4 @@ def reconstruct_limited(angio_a: Angiogram, angio_b: Angiogram, seeds: Seeds,
 
 
 if __name__ == "__main__":
-    sys.exit(_child())
+    sys.exit(_fresh_child())
