@@ -26,6 +26,7 @@ from recon.centerline import VesselnessMap, compute_vesselness
 from recon.errors import CoronaryError
 from recon.matching import match_centerlines
 from recon.measure import lumen_profile, measure_lumen
+from recon.optimal_view import optimal_view
 from recon.pipeline import (
     PipelineError,
     Progress,
@@ -204,6 +205,7 @@ def reconstruct_tree(
             if junction is not None:
                 rec = _from_carina(rec, junction)
             branches.append(rec)
+        branches = _best_views_among_branches(branches)
     _notify(progress, "building the tree's surface", 0.85)
     t1 = time.perf_counter()
     if len(branches) == 1:  # the segment's own surface is the tree's
@@ -222,6 +224,17 @@ def reconstruct_tree(
     return TreeReconstruction(seeds=seeds, branches=tuple(branches), bifurcations=bifurcations,
                               tree_surface=tree_surface, calibration=calibration,
                               timings_ms=timings)
+
+
+def _best_views_among_branches(branches: list[Reconstruction]) -> list[Reconstruction]:
+    """Each branch with its best next view (recon.optimal_view) chosen with the tree's other
+    branches as the vessels it must not overlap."""
+    shapes = [(rec.centerline_3d.X_world,
+               np.interp(rec.centerline_3d.s_mm, rec.profile.s_mm,
+                         rec.profile.diameter_smooth_mm) / 2.0) for rec in branches]
+    return [replace(rec, optimal_view=optimal_view(
+        *shapes[k], rec.view_a, {"a": rec.view_a, "b": rec.view_b},
+        others=tuple(shapes[:k] + shapes[k + 1:]))) for k, rec in enumerate(branches)]
 
 
 def _trace_both(angio_a: Angiogram, angio_b: Angiogram, seg: Segment,

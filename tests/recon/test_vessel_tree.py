@@ -128,3 +128,26 @@ def test_reconstruct_on_the_command_line_does_every_segment_or_the_one_named(tmp
     assert proc.returncode == 2
     assert proc.stderr.count("\n") == 1 and "no segment 'LCX'" in proc.stderr
     assert not (tmp_path / "x").exists()
+
+
+def test_each_branchs_best_view_keeps_the_other_branches_off_it(tree_case):
+    """A branch's recommended view is chosen with the tree's other branches as vessels it
+    must not overlap: its overlap map counts them (it differs from the map of the branch
+    alone, which sees only the branch crossing itself), and its best angle is at least as
+    good as the branch-alone choice by that measure (foreshortening + overlap)."""
+    from recon.optimal_view import optimal_view
+
+    _, tree = tree_case
+    for rec in tree.branches:
+        c = rec.centerline_3d
+        radius = np.interp(c.s_mm, rec.profile.s_mm, rec.profile.diameter_smooth_mm) / 2
+        alone = optimal_view(c.X_world, radius, rec.view_a)
+        chosen = rec.optimal_view
+        assert chosen is not None
+        assert np.any(chosen.overlap_map_pct > alone.overlap_map_pct + 1e-9)
+        score = chosen.foreshortening_map_pct + chosen.overlap_map_pct
+        alphas, betas = list(chosen.alpha_grid_deg), list(chosen.beta_grid_deg)
+        best, other = ((betas.index(v.angles_deg[1]), alphas.index(v.angles_deg[0]))
+                       for v in (chosen, alone))
+        assert score[best] <= score[other] + 1e-9
+        assert chosen.overlap_pct == pytest.approx(chosen.overlap_map_pct[best])
