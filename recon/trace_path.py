@@ -481,8 +481,10 @@ def _round_loops(route: Route, graph: _Graph, rings: list[NDArray[np.bool_]],
     waypoint that the route passes without turning back; the route without it is
     kept if that fails, if the new route doubles back or runs over itself
     (:func:`find_route_problem`), or if it runs back along itself (then it went into
-    a branch and back). Failing that, a tight loop's ring (:func:`ring_circuits`) is
-    spliced into the route at its crossing (:func:`_spliced`).
+    a branch and back). Failing that, a tight loop's ring (:func:`ring_circuits`, in the
+    masks above the band's level: a hole the band itself shows is no tight loop's, and
+    between a vessel, a branch and a crossing vessel it often is one) is spliced into
+    the route at its crossing (:func:`_spliced`).
     """
     o = np.asarray(origin, float)
     for ring_band in rings:
@@ -490,7 +492,7 @@ def _round_loops(route: Route, graph: _Graph, rings: list[NDArray[np.bool_]],
         if loops:
             break
     else:
-        for ring_band in rings:
+        for ring_band in rings[1:]:  # a hole that shows only above the band's level
             circuits = ring_circuits(ring_band, route.path_px - o, radius_px)
             if circuits:
                 return _spliced(route, circuits, o, radius_px)

@@ -33,7 +33,7 @@ import struct
 import subprocess
 import sys
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Iterable, Iterator
 from typing import IO, TYPE_CHECKING, Any
 
 from recon.errors import CoronaryError
@@ -86,16 +86,7 @@ def run_isolated(target: str, args: tuple, progress: Progress | None = None,
         frames_out.close()
         err_out.close()
         reader.start()
-        while outcome is None:
-            try:
-                frame = frames_in.recv()
-            except (EOFError, OSError):
-                break
-            if frame[0] == "progress":
-                if progress is not None:
-                    progress(frame[1], frame[2])
-            else:
-                outcome = frame
+        outcome = _relay(_received(frames_in), progress)
     except BaseException:
         if proc.pid is not None:
             proc.kill()
@@ -107,6 +98,26 @@ def run_isolated(target: str, args: tuple, progress: Progress | None = None,
     reader.join(timeout=5.0)
     code = proc.exitcode if proc.exitcode is not None else 1
     return _outcome(outcome, code, stderr_lines, what)
+
+
+def _received(conn: Any) -> Iterator[tuple]:
+    """The frames arriving on a pipe's end, until the child closes it."""
+    while True:
+        try:
+            yield conn.recv()
+        except (EOFError, OSError):
+            return
+
+
+def _relay(frames: Iterable[tuple], progress: Progress | None) -> tuple | None:
+    """Pass the progress frames on; the last frame (result or error), or None if the
+    child ended without one."""
+    for frame in frames:
+        if frame[0] != "progress":
+            return frame
+        if progress is not None:
+            progress(frame[1], frame[2])
+    return None
 
 
 def _outcome(outcome: tuple | None, code: int, stderr_lines: list[bytes], what: str) -> Any:
@@ -149,15 +160,7 @@ def _run_fresh(target: str, args: tuple, progress: Progress | None,
         with contextlib.suppress(BrokenPipeError):  # a child that died at once
             proc.stdin.write(pickle.dumps((target, args, progress is not None)))
             proc.stdin.close()
-        while outcome is None:
-            frame = _read_frame(proc.stdout)
-            if frame is None:
-                break
-            if frame[0] == "progress":
-                if progress is not None:
-                    progress(frame[1], frame[2])
-            else:
-                outcome = frame
+        outcome = _relay(iter(lambda: _read_frame(proc.stdout), None), progress)
     except BaseException:
         proc.kill()
         raise
