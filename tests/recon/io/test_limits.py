@@ -60,7 +60,9 @@ def test_the_cpu_limit_holds_to_a_fraction_of_a_second() -> None:
             a = np.random.default_rng(0).random((200, 200))
             while _cpu_s() - start < 5.0:
                 a = np.tanh(a @ a.T / 200.0)
-    assert 0.25 <= _cpu_s() - start < 0.8  # the timer and getrusage tick apart a little
+    # getrusage and the profiling timer tick apart: in a loaded CI run the limit of 0.3 s
+    # was reached when getrusage said 0.20 s; the point is that 1 s no longer lets 2 s by
+    assert 0.1 <= _cpu_s() - start < 0.8
     time.sleep(0.05)
     with job_limits(limits_for(1, memory_gb=0, cpu_s=0.3), "the test"):
         pass  # a block that ends in time: no timer left behind
