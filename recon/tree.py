@@ -21,13 +21,14 @@ import numpy as np
 import trimesh
 
 from recon.bifurcation import BifurcationQCA, Junction, bifurcation_qca, carina_s_mm
-from recon.calibration import CalibrationResult, calibrate, refine_with_matches
+from recon.calibration import CalibrationResult, refine_with_matches
 from recon.centerline import VesselnessMap, compute_vesselness
 from recon.errors import CoronaryError
 from recon.matching import match_centerlines
 from recon.measure import lumen_profile, measure_lumen
 from recon.optimal_view import optimal_view
 from recon.pipeline import (
+    CALIBRATION_CHOICES,
     PipelineError,
     Progress,
     Reconstruction,
@@ -35,6 +36,7 @@ from recon.pipeline import (
     _check_separation,
     _notify,
     _trace,
+    calibrate_view_b,
     reconstruct_pair,
 )
 from recon.seeds import Seeds, Segment
@@ -135,7 +137,10 @@ def tree_calibration(angio_a: Angiogram, angio_b: Angiogram, seeds: Seeds,
                      options: ReconstructionOptions) -> CalibrationResult:
     """View B calibrated on the whole tree.
 
-    The features: every segment's ends and every feature (eq. 5). With
+    The features: every segment's ends and every feature (eq. 5), calibrated by
+    the rule ``options.calibration`` as one segment is
+    (:func:`recon.pipeline.calibrate_view_b`; "curves" adds the first
+    segment's two traced curves). With
     ``options.self_calibration`` and two or more segments the matched
     centerline points of all of them (:data:`MATCHED_POINTS_PER_BRANCH`
     each, matched under that first pose) are added with the robust loss
@@ -144,7 +149,9 @@ def tree_calibration(angio_a: Angiogram, angio_b: Angiogram, seeds: Seeds,
     """
     view_a, view_b = angio_a.geometry, angio_b.geometry
     feat_a, feat_b = _tree_features(seeds, traced)
-    cal = calibrate(view_a, view_b, feat_a, feat_b, method=options.optimizer)
+    cl_a, cl_b = traced[0]
+    cal = calibrate_view_b(view_a, view_b, feat_a, feat_b, options,
+                           (cl_a.points_px, cl_b.points_px))
     if len(traced) < 2 or options.optimizer != "palm" or not options.self_calibration:
         return cal
     matched_a, matched_b = [], []
@@ -169,6 +176,9 @@ def reconstruct_tree(
     options = options or ReconstructionOptions()
     if not seeds.segments:
         raise PipelineError("seeds: no segment to reconstruct (segments is empty)")
+    if options.calibration not in CALIBRATION_CHOICES:
+        raise PipelineError(f"unknown calibration {options.calibration!r} (use one of "
+                            f"{', '.join(CALIBRATION_CHOICES)})")
     _check_separation(angio_a.geometry, angio_b.geometry, options.allow_close_views)
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
@@ -201,7 +211,7 @@ def reconstruct_tree(
                                     np.sqrt(parent.surface.sections.area_mm2 / np.pi))
             rec = reconstruct_pair(angio_a, angio_b, seeds, replace(per_branch, segment=k),
                                    None, vesselness, traced=traced[k], calibration=calibration,
-                                   junction=junction)
+                                   junction=junction, best_view=False)
             if junction is not None:
                 rec = _from_carina(rec, junction)
             branches.append(rec)
@@ -229,9 +239,8 @@ def reconstruct_tree(
 def _best_views_among_branches(branches: list[Reconstruction]) -> list[Reconstruction]:
     """Each branch with its best next view (recon.optimal_view) chosen with the tree's other
     branches as the vessels it must not overlap."""
-    shapes = [(rec.centerline_3d.X_world,
-               np.interp(rec.centerline_3d.s_mm, rec.profile.s_mm,
-                         rec.profile.diameter_smooth_mm) / 2.0) for rec in branches]
+    shapes = [(rec.centerline_3d.X_world, rec.profile.smooth_radius_at(rec.centerline_3d.s_mm))
+              for rec in branches]
     return [replace(rec, optimal_view=optimal_view(
         *shapes[k], rec.view_a, {"a": rec.view_a, "b": rec.view_b},
         others=tuple(shapes[:k] + shapes[k + 1:]))) for k, rec in enumerate(branches)]
@@ -259,14 +268,16 @@ def _ms(since: float) -> float:
 
 def _from_carina(rec: Reconstruction, junction: Junction) -> Reconstruction:
     """A branch's profile and measurements from its carina on (the stretch before
-    lies inside the parent's lumen); arc lengths stay the branch's own."""
+    lies inside the parent's lumen); arc lengths stay the branch's own. The whole
+    branch's 95 % intervals do not describe these measurements, so a trimmed branch
+    has none."""
     cl = rec.centerline_3d
     s_c = carina_s_mm(cl.X_world, junction.parent_X_world, junction.parent_radius_mm)
     keep = cl.s_mm >= s_c
     if np.count_nonzero(keep) < 12:  # too short beyond the carina: the whole branch
         return rec
     profile = lumen_profile(cl.s_mm[keep], rec.surface.sections.area_mm2[keep])
-    return replace(rec, profile=profile, measurements=measure_lumen(profile))
+    return replace(rec, profile=profile, measurements=measure_lumen(profile), intervals=None)
 
 
 def _profile_on(rec: Reconstruction) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

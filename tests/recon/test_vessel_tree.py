@@ -140,7 +140,7 @@ def test_each_branchs_best_view_keeps_the_other_branches_off_it(tree_case):
     _, tree = tree_case
     for rec in tree.branches:
         c = rec.centerline_3d
-        radius = np.interp(c.s_mm, rec.profile.s_mm, rec.profile.diameter_smooth_mm) / 2
+        radius = rec.profile.smooth_radius_at(c.s_mm)
         alone = optimal_view(c.X_world, radius, rec.view_a)
         chosen = rec.optimal_view
         assert chosen is not None
@@ -151,3 +151,75 @@ def test_each_branchs_best_view_keeps_the_other_branches_off_it(tree_case):
                        for v in (chosen, alone))
         assert score[best] <= score[other] + 1e-9
         assert chosen.overlap_pct == pytest.approx(chosen.overlap_map_pct[best])
+
+
+@pytest.fixture(scope="module")
+def small_tree():
+    """The demo phantom with one clicked branch: a two-segment tree, quick to reconstruct."""
+    case = make_phantom("static", 7)
+    seeds, _, _ = tree_seeds(np.random.default_rng(1), case)
+    assert len(seeds.segments) == 2
+    return case_angiograms(case), seeds
+
+
+@pytest.mark.parametrize("mode", ["header", "supported", "curves"])
+def test_the_tree_calibrates_by_the_rule_a_single_segment_uses(small_tree, mode):
+    """``ReconstructionOptions.calibration`` reaches the tree: the tree's view B is what
+    :func:`recon.pipeline.calibrate_view_b` makes of the tree-wide features under that
+    rule, and "header" leaves B at its header pose."""
+    from recon.pipeline import ReconstructionOptions, calibrate_view_b
+    from recon.tree import _tree_features
+
+    (a, b), seeds = small_tree
+    options = ReconstructionOptions(calibration=mode)
+    tree = reconstruct_tree(a, b, seeds, options)
+    traced = [(rec.centerline_a, rec.centerline_b) for rec in tree.branches]
+    feat_a, feat_b = _tree_features(seeds, traced)
+    expected = calibrate_view_b(a.geometry, b.geometry, feat_a, feat_b, options,
+                                (traced[0][0].points_px, traced[0][1].points_px))
+    assert tree.calibration.correction == expected.correction
+    np.testing.assert_allclose(tree.first.view_b.source_world, expected.view_b.source_world,
+                               atol=1e-9)
+    if mode == "header":
+        assert tree.calibration.correction == "header"
+        np.testing.assert_allclose(tree.first.view_b.source_world, b.geometry.source_world,
+                                   atol=1e-9)
+    if mode == "curves":
+        assert tree.calibration.correction == "curves"
+    assert all(rec.view_b is tree.first.view_b for rec in tree.branches)
+    assert tree.first.intervals is not None  # the rule's pose posterior gives intervals
+
+
+def test_an_unknown_calibration_rule_is_refused_before_tracing(small_tree, monkeypatch):
+    import recon.tree
+    from recon.pipeline import PipelineError, ReconstructionOptions
+
+    def no_tracing(*args, **kwargs):
+        raise AssertionError("traced before the options were checked")
+
+    monkeypatch.setattr(recon.tree, "_trace_both", no_tracing)
+    (a, b), seeds = small_tree
+    with pytest.raises(PipelineError, match="unknown calibration 'sideways'"):
+        reconstruct_tree(a, b, seeds, ReconstructionOptions(calibration="sideways"))
+
+
+def test_each_branch_gets_its_best_view_computed_once(small_tree, monkeypatch):
+    """The tree chooses every branch's view among the others, so reconstruct_pair's
+    own choice (the branch alone) is skipped: one optimal_view call per branch."""
+    import recon.pipeline
+    import recon.tree
+
+    calls = []
+    real = recon.tree.optimal_view
+
+    def counting(*args, **kwargs):
+        calls.append(kwargs.get("others"))
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(recon.tree, "optimal_view", counting)
+    monkeypatch.setattr(recon.pipeline, "optimal_view", counting)
+    (a, b), seeds = small_tree
+    tree = reconstruct_tree(a, b, seeds)
+    assert len(calls) == len(seeds.segments)
+    assert all(others is not None and len(others) == len(seeds.segments) - 1 for others in calls)
+    assert all(rec.optimal_view is not None for rec in tree.branches)
