@@ -189,6 +189,8 @@ def reconstruct_tree(
                       compute_vesselness(angio_b.image, pixel_mm=view_b.pixel_mm_at_isocenter))
     traced = [_trace_both(angio_a, angio_b, seg, vesselness, options, len(seeds.segments))
               for seg in seeds.segments]
+    if len(traced) > 1:
+        traced = _mark_tree_overlaps(traced)
     timings["trace"] = _ms(t0)
     if len(seeds.segments) == 1:  # exactly the one-segment reconstruction
         rec = reconstruct_pair(angio_a, angio_b, seeds, replace(options, segment=0), progress,
@@ -244,6 +246,43 @@ def _best_views_among_branches(branches: list[Reconstruction]) -> list[Reconstru
     return [replace(rec, optimal_view=optimal_view(
         *shapes[k], rec.view_a, {"a": rec.view_a, "b": rec.view_b},
         others=tuple(shapes[:k] + shapes[k + 1:]))) for k, rec in enumerate(branches)]
+
+
+#: Reliability given to a traced point whose lumen another segment's lumen overlaps in
+#: that view (below recon.triangulation.OVERLAP_RELIABILITY: the other view's radius is
+#: used there when that view is clear).
+TREE_OVERLAP_RELIABILITY = 0.05
+#: Two lumen discs overlap when their centres are closer than this fraction of the sum of
+#: their radii (1: touching; lumens that only touch or graze leave the fit nearly intact).
+TREE_OVERLAP_FRACTION = 0.5
+
+
+def _overlapped(cl: Centerline2D, others: list[Centerline2D]) -> np.ndarray:
+    """(N,) bool: the points of ``cl`` whose lumen disc (centre, radius px) meets the lumen
+    disc of a point of another segment's trace in the same view."""
+    hit = np.zeros(len(cl.points_px), dtype=bool)
+    for other in others:
+        gap = np.linalg.norm(cl.points_px[:, None, :] - other.points_px[None, :, :], axis=2)
+        reach = TREE_OVERLAP_FRACTION * (cl.radius_px[:, None] + other.radius_px[None, :])
+        hit |= np.any(gap < reach, axis=1)
+    return hit
+
+
+def _mark_tree_overlaps(traced: list[tuple[Centerline2D, Centerline2D]]
+                        ) -> list[tuple[Centerline2D, Centerline2D]]:
+    """Every segment's traces with the reliability lowered where another segment of the
+    tree overlaps its lumen in that view, so that the view where the two lumens are
+    apart gives the radius there (recon.triangulation, step 5)."""
+    out = []
+    for k, pair in enumerate(traced):
+        marked = []
+        for v, cl in enumerate(pair):
+            hit = _overlapped(cl, [traced[j][v] for j in range(len(traced)) if j != k])
+            rel = np.where(hit, np.minimum(cl.reliability, TREE_OVERLAP_RELIABILITY),
+                           cl.reliability)
+            marked.append(replace(cl, reliability=rel))
+        out.append((marked[0], marked[1]))
+    return out
 
 
 def _trace_both(angio_a: Angiogram, angio_b: Angiogram, seg: Segment,

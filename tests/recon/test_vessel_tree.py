@@ -223,3 +223,28 @@ def test_each_branch_gets_its_best_view_computed_once(small_tree, monkeypatch):
     assert len(calls) == len(seeds.segments)
     assert all(others is not None and len(others) == len(seeds.segments) - 1 for others in calls)
     assert all(rec.optimal_view is not None for rec in tree.branches)
+
+
+def test_a_trace_is_untrusted_where_another_segment_overlaps_its_lumen_in_that_view():
+    """Lumens that overlap in one view (centres closer than half the radii's sum) lower
+    that view's reliability there and only there; the other view stays as traced."""
+    from recon.tree import TREE_OVERLAP_RELIABILITY, _mark_tree_overlaps
+    from recon.types import Centerline2D
+
+    def trace(points, radius):
+        n = len(points)
+        return Centerline2D(points_px=np.asarray(points, dtype=float),
+                            radius_px=np.full(n, radius), brightness=np.ones(n))
+
+    x = np.arange(0.0, 100.0)
+    main_a = trace(np.column_stack([x, np.full(100, 50.0)]), 4.0)
+    main_b = trace(np.column_stack([x, np.full(100, 50.0)]), 4.0)
+    # in A the branch crosses the main at x = 40 (vertical); in B it stays 20 px away
+    branch_a = trace(np.column_stack([np.full(60, 40.0), np.arange(20.0, 80.0)]), 3.0)
+    branch_b = trace(np.column_stack([np.arange(20.0, 80.0), np.full(60, 70.0)]), 3.0)
+    marked = _mark_tree_overlaps([(main_a, main_b), (branch_a, branch_b)])
+    low = marked[0][0].reliability <= TREE_OVERLAP_RELIABILITY
+    np.testing.assert_array_equal(np.flatnonzero(low), np.arange(37, 44))  # |x - 40| < 3.5
+    low_branch = marked[1][0].reliability <= TREE_OVERLAP_RELIABILITY
+    np.testing.assert_array_equal(np.flatnonzero(low_branch), np.arange(27, 34))  # |y - 50| < 3.5
+    assert np.all(marked[0][1].reliability == 1.0) and np.all(marked[1][1].reliability == 1.0)
