@@ -1,8 +1,12 @@
 """The vessel tree: every segment of the seeds in one reconstruction.
 
-    trace every segment in both views -> calibrate view B once on the whole
-    tree (every segment's ends, every feature; with self-calibration also
-    the matched centerline points of all of them, robust loss)
+    trace every segment in both views; a view's radius untrusted where another
+    segment's lumen overlaps it there
+    -> calibrate view B once on the whole tree (every segment's ends, every
+    feature, by the rule of ``options.calibration``; with self-calibration
+    also the matched centerline points of all of them, robust loss)
+    -> a branch's origin stretch redrawn from the other view where, in one
+       view, its trace runs inside the parent's lumen
     -> per segment, parents first: the stages of ``reconstruct_pair``
        (matching, triangulation, sections, QCA) with the tree's calibration,
        a branch joined to its parent at the bifurcation
@@ -24,6 +28,7 @@ from recon.bifurcation import BifurcationQCA, Junction, bifurcation_qca, carina_
 from recon.calibration import CalibrationResult, refine_with_matches
 from recon.centerline import VesselnessMap, compute_vesselness
 from recon.errors import CoronaryError
+from recon.geometry import ViewGeometry, triangulate
 from recon.matching import match_centerlines
 from recon.measure import lumen_profile, measure_lumen
 from recon.optimal_view import optimal_view
@@ -41,7 +46,8 @@ from recon.pipeline import (
 )
 from recon.seeds import Seeds, Segment
 from recon.surface import TreeSurface, build_tree_surface
-from recon.types import Angiogram, Centerline2D
+from recon.triangulation import point_polyline_distance
+from recon.types import Angiogram, Centerline2D, arclength
 
 __all__ = [
     "TreeReconstruction",
@@ -204,6 +210,9 @@ def reconstruct_tree(
         timings["calibrate"] = _ms(t1)
         branches = []
         per_branch = replace(options, self_calibration=False)
+        traced = [traced[k] if seg.parent is None else _origin_from_the_clear_view(
+            traced[k], traced[seeds.segment_index(seg.parent)], view_a, calibration.view_b)
+            for k, seg in enumerate(seeds.segments)]
         for k, seg in enumerate(seeds.segments):
             _notify(progress, f"segment {seg.name}", 0.3 + 0.5 * k / len(seeds.segments))
             junction = None
@@ -283,6 +292,81 @@ def _mark_tree_overlaps(traced: list[tuple[Centerline2D, Centerline2D]]
             marked.append(replace(cl, reliability=rel))
         out.append((marked[0], marked[1]))
     return out
+
+
+#: Consecutive points that must be clear of the parent's lumen where a branch's trace
+#: leaves it (:func:`_first_clear`).
+CLEAR_RUN = 3
+
+
+def _first_clear(cl: Centerline2D, parent: Centerline2D) -> int | None:
+    """Index of the first of :data:`CLEAR_RUN` consecutive points of a branch's trace whose
+    lumen is clear of the parent's (centre farther from the parent's trace than the two
+    radii together), or None when the trace never clears it."""
+    gap = np.linalg.norm(cl.points_px[:, None, :] - parent.points_px[None, :, :], axis=2)
+    nearest = np.argmin(gap, axis=1)
+    clear = gap[np.arange(len(gap)), nearest] >= parent.radius_px[nearest] + cl.radius_px
+    run = np.convolve(clear.astype(int), np.ones(CLEAR_RUN, dtype=int), "valid") == CLEAR_RUN
+    return int(np.flatnonzero(run)[0]) if run.any() else None
+
+
+def _origin_from_the_clear_view(pair: tuple[Centerline2D, Centerline2D],
+                                parent: tuple[Centerline2D, Centerline2D],
+                                view_a: ViewGeometry, view_b: ViewGeometry
+                                ) -> tuple[Centerline2D, Centerline2D]:
+    """A branch's traces with the origin stretch of a view where the branch runs inside
+    its parent's projected lumen redrawn from the other view.
+
+    In view v the trace is taken to run along the parent's lumen when it needs more
+    than twice the two lumens' width (parent's radius + branch's, px, at the origin)
+    of arc to become clear of it (:func:`_first_clear`, at point S). If the other
+    view's trace is clear where it meets the epipolar line of S (point S'), the
+    stretch is redrawn from that view: the 3D points on the other view's rays
+    through its trace from the origin to S', their distance from its source
+    interpolated by arc length between the triangulated origin and the
+    triangulated (S, S'), projected into view v and resampled to the stretch's
+    point count. Their reliability is lowered, so the radius there is the other
+    view's (recon.triangulation, step 5).
+    """
+    views = (view_a, view_b)
+    out = list(pair)
+    seps = [_first_clear(pair[v], parent[v]) for v in (0, 1)]
+    if seps[0] is None or seps[1] is None:
+        return pair
+    for v in (0, 1):
+        o = 1 - v
+        cl, other = pair[v], pair[o]
+        i_sep = seps[v]
+        n0 = int(np.argmin(np.linalg.norm(parent[v].points_px - cl.points_px[0], axis=1)))
+        width_px = float(parent[v].radius_px[n0] + cl.radius_px[0])
+        if arclength(cl.points_px)[i_sep] < 2.0 * width_px:
+            continue  # the branch leaves its parent as a branch does: nothing to redraw
+        src_v = views[v].source_world
+        ray = views[v].ray_directions(cl.points_px[i_sep][None])[0]
+        reach = views[v].sod_mm * np.linspace(0.7, 1.3, 400)
+        line = views[o].project(src_v + reach[:, None] * ray)
+        dist = point_polyline_distance(other.points_px, line)
+        j_sep = int(np.argmin(dist[: max(len(dist) // 2, 4)]))
+        if j_sep <= seps[o] or dist[j_sep] > 2.0:
+            continue  # the other view is inside the parent's lumen there too
+        ends_v, ends_o = cl.points_px[[0, i_sep]], other.points_px[[0, j_sep]]
+        X = triangulate(*((ends_v, ends_o) if v == 0 else (ends_o, ends_v)), view_a, view_b)
+        src_o = views[o].source_world
+        s_o = arclength(other.points_px[: j_sep + 1])
+        f = s_o / max(float(s_o[-1]), 1e-9)
+        d0, d1 = np.linalg.norm(X - src_o, axis=1)
+        X_o = src_o + ((1.0 - f) * d0 + f * d1)[:, None] * views[o].ray_directions(
+            other.points_px[: j_sep + 1])
+        q = views[v].project(X_o)
+        s_q = arclength(q)
+        t = np.linspace(0.0, float(s_q[-1]), i_sep + 1)
+        points = cl.points_px.copy()
+        points[: i_sep + 1] = np.column_stack([np.interp(t, s_q, q[:, 0]),
+                                               np.interp(t, s_q, q[:, 1])])
+        reliability = cl.reliability.copy()
+        reliability[: i_sep + 1] = np.minimum(reliability[: i_sep + 1], TREE_OVERLAP_RELIABILITY)
+        out[v] = replace(cl, points_px=points, reliability=reliability)
+    return out[0], out[1]
 
 
 def _trace_both(angio_a: Angiogram, angio_b: Angiogram, seg: Segment,

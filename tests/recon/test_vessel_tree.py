@@ -19,6 +19,7 @@ from recon.pipeline import reconstruct_pair
 from recon.synth import make_phantom
 from recon.synth.tree import make_tree_case, tree_seeds
 from recon.tree import reconstruct_tree
+from recon.triangulation import point_polyline_distance
 
 
 @pytest.fixture(scope="module")
@@ -248,3 +249,42 @@ def test_a_trace_is_untrusted_where_another_segment_overlaps_its_lumen_in_that_v
     low_branch = marked[1][0].reliability <= TREE_OVERLAP_RELIABILITY
     np.testing.assert_array_equal(np.flatnonzero(low_branch), np.arange(27, 34))  # |y - 50| < 3.5
     assert np.all(marked[0][1].reliability == 1.0) and np.all(marked[1][1].reliability == 1.0)
+
+
+def test_a_branch_origin_traced_along_its_parent_is_redrawn_from_the_clear_view():
+    """A branch leaving its parent at 25 deg in 3D; view B's trace of it runs 6 mm along
+    the parent's centre before it crosses over (as a trace through merged lumens does),
+    view A's follows the branch. The redrawn B stretch lies on the branch's true
+    projection (within 1 px), far closer than the trace it replaces; A is unchanged."""
+    from recon.tree import TREE_OVERLAP_RELIABILITY, _origin_from_the_clear_view
+    from recon.types import Centerline2D
+
+    case = make_phantom("static", 7, render=False)
+    view_a, view_b = case.view_a, case.view_b_true
+    centre = np.asarray(case.truth.segment_X_world[len(case.truth.segment_X_world) // 2])
+    u = np.array([1.0, 0.0, 0.0])
+    w = np.array([np.cos(np.radians(25.0)), np.sin(np.radians(25.0)), 0.0])
+    s = np.arange(0.0, 30.0, 0.1)[:, None]
+    parent_X = centre + (s - 10.0) * u
+    branch_X = centre + s * w
+
+    def trace(view, X, radius_mm):
+        p = view.project(X)
+        r = np.full(len(p), radius_mm / view.pixel_mm_at_isocenter)
+        return Centerline2D(points_px=p, radius_px=r, brightness=np.ones(len(p)))
+
+    parent = (trace(view_a, parent_X, 1.5), trace(view_b, parent_X, 1.5))
+    true_b = view_b.project(branch_X)
+    # B's trace: along the parent's centre for 6 mm, then a straight jump onto the branch
+    along = centre + s[s[:, 0] <= 6.0] * u
+    rejoin = np.flatnonzero(s[:, 0] >= 9.0)[0]
+    bad = np.vstack([along, branch_X[rejoin:]])
+    branch = (trace(view_a, branch_X, 1.0), trace(view_b, bad, 1.0))
+    a_new, b_new = _origin_from_the_clear_view(branch, parent, view_a, view_b)
+    assert a_new is branch[0]
+    changed = np.flatnonzero(np.any(b_new.points_px != branch[1].points_px, axis=1))
+    assert changed.size > 10
+    before = np.max(point_polyline_distance(branch[1].points_px[changed], true_b))
+    after = np.max(point_polyline_distance(b_new.points_px[changed], true_b))
+    assert before > 3.0 and after < 1.0, (before, after)
+    assert np.all(b_new.reliability[changed] <= TREE_OVERLAP_RELIABILITY)
