@@ -220,11 +220,15 @@ def reconstruct_tree(
                 parent = branches[seeds.segment_index(seg.parent)]
                 junction = Junction(parent.centerline_3d.X_world,
                                     np.sqrt(parent.surface.sections.area_mm2 / np.pi))
+            # a joined branch is measured from its carina on, which the whole branch's
+            # intervals do not describe: without the posterior none are sampled
             rec = reconstruct_pair(angio_a, angio_b, seeds, replace(per_branch, segment=k),
-                                   None, vesselness, traced=traced[k], calibration=calibration,
+                                   None, vesselness, traced=traced[k],
+                                   calibration=calibration if junction is None
+                                   else replace(calibration, posterior=None),
                                    junction=junction, best_view=False)
             if junction is not None:
-                rec = _from_carina(rec, junction)
+                rec = _from_carina(replace(rec, calibration=calibration), junction)
             branches.append(rec)
         branches = _best_views_among_branches(branches)
     _notify(progress, "building the tree's surface", 0.85)
@@ -391,16 +395,15 @@ def _ms(since: float) -> float:
 
 def _from_carina(rec: Reconstruction, junction: Junction) -> Reconstruction:
     """A branch's profile and measurements from its carina on (the stretch before
-    lies inside the parent's lumen); arc lengths stay the branch's own. The whole
-    branch's 95 % intervals do not describe these measurements, so a trimmed branch
-    has none."""
+    lies inside the parent's lumen); arc lengths stay the branch's own. A joined
+    branch has no 95 % intervals (the whole branch's would not describe these)."""
     cl = rec.centerline_3d
     s_c = carina_s_mm(cl.X_world, junction.parent_X_world, junction.parent_radius_mm)
     keep = cl.s_mm >= s_c
     if np.count_nonzero(keep) < 12:  # too short beyond the carina: the whole branch
         return rec
     profile = lumen_profile(cl.s_mm[keep], rec.surface.sections.area_mm2[keep])
-    return replace(rec, profile=profile, measurements=measure_lumen(profile), intervals=None)
+    return replace(rec, profile=profile, measurements=measure_lumen(profile))
 
 
 def _profile_on(rec: Reconstruction) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

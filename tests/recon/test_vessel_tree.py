@@ -188,7 +188,11 @@ def test_the_tree_calibrates_by_the_rule_a_single_segment_uses(small_tree, mode)
     if mode == "curves":
         assert tree.calibration.correction == "curves"
     assert all(rec.view_b is tree.first.view_b for rec in tree.branches)
+    assert all(rec.calibration is tree.calibration for rec in tree.branches)
     assert tree.first.intervals is not None  # the rule's pose posterior gives intervals
+    # a joined branch is measured from its carina: the whole branch's intervals would
+    # not describe it, so it has none
+    assert all(rec.intervals is None for rec in tree.branches[1:])
 
 
 def test_an_unknown_calibration_rule_is_refused_before_tracing(small_tree, monkeypatch):
