@@ -112,6 +112,11 @@ class LumenProfile:
     area_smooth_mm2: FloatArray
     threshold_rel: float = _DELTA_MIN
 
+    def smooth_radius_at(self, s_mm: ArrayLike) -> FloatArray:
+        """The smoothed lumen radius (mm) at arc lengths ``s_mm`` (held constant beyond
+        the profile's ends): half of ``diameter_smooth_mm``, interpolated."""
+        return np.interp(np.asarray(s_mm, dtype=float), self.s_mm, self.diameter_smooth_mm) / 2.0
+
     @property
     def relative_deficit(self) -> FloatArray:
         """(M,) 1 - smoothed diameter / reference (positive where narrowed)."""

@@ -53,6 +53,7 @@ __all__ = [
     "ReconstructionOptions",
     "Reconstruction",
     "calibrate_from_seeds",
+    "calibrate_view_b",
     "input_warnings",
     "reconstruct_pair",
 ]
@@ -251,6 +252,24 @@ def _features(seeds: Seeds, segment_index: int, cl_a: Centerline2D | None = None
     return np.vstack(pa), np.vstack(pb)
 
 
+def calibrate_view_b(
+    view_a: ViewGeometry, view_b_header: ViewGeometry, feat_a: np.ndarray, feat_b: np.ndarray,
+    options: ReconstructionOptions, curves: tuple[np.ndarray, np.ndarray] | None = None,
+) -> CalibrationResult:
+    """View B calibrated on the corresponding features (K, 2) per view by the rule
+    ``options.calibration`` (:class:`ReconstructionOptions`); ``curves`` are the traced
+    centerlines (N, 2) per view that the "curves" rule adds (ignored by the others)."""
+    if options.calibration not in CALIBRATION_CHOICES:
+        raise PipelineError(f"unknown calibration {options.calibration!r} (use one of "
+                            f"{', '.join(CALIBRATION_CHOICES)})")
+    cal = calibrate_supported(view_a, view_b_header, feat_a, feat_b, method=options.optimizer,
+                              candidates=CALIBRATION_CHOICES[options.calibration])
+    if options.calibration == "curves" and curves is not None:
+        cal = calibrate_with_curves(view_a, view_b_header, feat_a, feat_b, curves[0], curves[1],
+                                    initial=cal)
+    return cal
+
+
 def calibrate_from_seeds(
     angio_a: Angiogram, angio_b: Angiogram, seeds: Seeds, optimizer: str = "palm",
     segment: int = 0, vesselness: tuple[VesselnessMap, VesselnessMap] | None = None,
@@ -271,12 +290,10 @@ def calibrate_from_seeds(
         cl_b = _trace(angio_b, seg.b, vesselness[1], "B",
                       angio_b.geometry.pixel_mm_at_isocenter, intensity[1])
     pa, pb = _features(seeds, segment, cl_a, cl_b)
-    cal = calibrate_supported(angio_a.geometry, angio_b.geometry, pa, pb, method=optimizer,
-                              candidates=CALIBRATION_CHOICES[calibration])
-    if calibration == "curves" and cl_a is not None and cl_b is not None:
-        cal = calibrate_with_curves(angio_a.geometry, angio_b.geometry, pa, pb,
-                                    cl_a.points_px, cl_b.points_px, initial=cal)
-    return cal
+    curves = (cl_a.points_px, cl_b.points_px) if cl_a is not None and cl_b is not None else None
+    return calibrate_view_b(angio_a.geometry, angio_b.geometry, pa, pb,
+                            ReconstructionOptions(optimizer=optimizer, calibration=calibration),
+                            curves)
 
 
 def reconstruct_pair(
@@ -290,6 +307,7 @@ def reconstruct_pair(
     traced: tuple[Centerline2D, Centerline2D] | None = None,
     calibration: CalibrationResult | None = None,
     junction: Junction | None = None,
+    best_view: bool = True,
 ) -> Reconstruction:
     """Run every stage on one segment of a pair of angiograms.
 
@@ -305,6 +323,8 @@ def reconstruct_pair(
         branch and calibrates once for all); those stages are then skipped.
     junction : a branch's parent; the 3D centerline's start is joined to it
         (:meth:`recon.bifurcation.Junction.join`).
+    best_view : compute the best next view (``optimal_view``); the tree turns it off
+        and chooses each branch's view with the other branches in sight.
     """
     options = options or ReconstructionOptions()
     seg = _segment(seeds, options.segment)
@@ -339,12 +359,8 @@ def reconstruct_pair(
     # 2. Calibrate view B on the corresponding features (eq. 5, PALM).
     _notify(progress, "calibrating the geometry", 0.35)
     feat_a, feat_b = _features(seeds, options.segment, cl_a, cl_b)
-    cal = calibration or calibrate_supported(
-        view_a, view_b_header, feat_a, feat_b, method=options.optimizer,
-        candidates=CALIBRATION_CHOICES[options.calibration])
-    if calibration is None and options.calibration == "curves":  # the traced curves too
-        cal = calibrate_with_curves(view_a, view_b_header, feat_a, feat_b, cl_a.points_px,
-                                    cl_b.points_px, initial=cal)
+    cal = calibration or calibrate_view_b(view_a, view_b_header, feat_a, feat_b, options,
+                                          (cl_a.points_px, cl_b.points_px))
     steps = [_step("features" if calibration is None else "tree", cal)]
     lap("calibrate")
 
@@ -391,8 +407,10 @@ def reconstruct_pair(
     lap("measure")
 
     # 8. Foreshortening in both views and the best next view (recon.optimal_view).
-    radius_mm = np.interp(cl3d.s_mm, profile.s_mm, profile.diameter_smooth_mm) / 2.0
-    best_view = optimal_view(cl3d.X_world, radius_mm, view_a, {"a": view_a, "b": cal.view_b})
+    next_view = None
+    if best_view:
+        next_view = optimal_view(cl3d.X_world, profile.smooth_radius_at(cl3d.s_mm), view_a,
+                                 {"a": view_a, "b": cal.view_b})
     lap("optimal_view")
 
     # 9. 95 % intervals: the pose posterior and the 2D radius error, sampled.
@@ -427,7 +445,7 @@ def reconstruct_pair(
         timings_ms=timings,
         consistency=consistency,
         warnings=tuple(warnings),
-        optimal_view=best_view,
+        optimal_view=next_view,
         intervals=intervals,
     )
 

@@ -1,8 +1,12 @@
 """The vessel tree: every segment of the seeds in one reconstruction.
 
-    trace every segment in both views -> calibrate view B once on the whole
-    tree (every segment's ends, every feature; with self-calibration also
-    the matched centerline points of all of them, robust loss)
+    trace every segment in both views; a view's radius untrusted where another
+    segment's lumen overlaps it there
+    -> calibrate view B once on the whole tree (every segment's ends, every
+    feature, by the rule of ``options.calibration``; with self-calibration
+    also the matched centerline points of all of them, robust loss)
+    -> a branch's origin stretch redrawn from the other view where, in one
+       view, its trace runs inside the parent's lumen
     -> per segment, parents first: the stages of ``reconstruct_pair``
        (matching, triangulation, sections, QCA) with the tree's calibration,
        a branch joined to its parent at the bifurcation
@@ -21,13 +25,15 @@ import numpy as np
 import trimesh
 
 from recon.bifurcation import BifurcationQCA, Junction, bifurcation_qca, carina_s_mm
-from recon.calibration import CalibrationResult, calibrate, refine_with_matches
+from recon.calibration import CalibrationResult, refine_with_matches
 from recon.centerline import VesselnessMap, compute_vesselness
 from recon.errors import CoronaryError
+from recon.geometry import ViewGeometry, triangulate
 from recon.matching import match_centerlines
 from recon.measure import lumen_profile, measure_lumen
 from recon.optimal_view import optimal_view
 from recon.pipeline import (
+    CALIBRATION_CHOICES,
     PipelineError,
     Progress,
     Reconstruction,
@@ -35,11 +41,13 @@ from recon.pipeline import (
     _check_separation,
     _notify,
     _trace,
+    calibrate_view_b,
     reconstruct_pair,
 )
 from recon.seeds import Seeds, Segment
 from recon.surface import TreeSurface, build_tree_surface
-from recon.types import Angiogram, Centerline2D
+from recon.triangulation import point_polyline_distance
+from recon.types import Angiogram, Centerline2D, arclength
 
 __all__ = [
     "TreeReconstruction",
@@ -135,7 +143,10 @@ def tree_calibration(angio_a: Angiogram, angio_b: Angiogram, seeds: Seeds,
                      options: ReconstructionOptions) -> CalibrationResult:
     """View B calibrated on the whole tree.
 
-    The features: every segment's ends and every feature (eq. 5). With
+    The features: every segment's ends and every feature (eq. 5), calibrated by
+    the rule ``options.calibration`` as one segment is
+    (:func:`recon.pipeline.calibrate_view_b`; "curves" adds the first
+    segment's two traced curves). With
     ``options.self_calibration`` and two or more segments the matched
     centerline points of all of them (:data:`MATCHED_POINTS_PER_BRANCH`
     each, matched under that first pose) are added with the robust loss
@@ -144,7 +155,9 @@ def tree_calibration(angio_a: Angiogram, angio_b: Angiogram, seeds: Seeds,
     """
     view_a, view_b = angio_a.geometry, angio_b.geometry
     feat_a, feat_b = _tree_features(seeds, traced)
-    cal = calibrate(view_a, view_b, feat_a, feat_b, method=options.optimizer)
+    cl_a, cl_b = traced[0]
+    cal = calibrate_view_b(view_a, view_b, feat_a, feat_b, options,
+                           (cl_a.points_px, cl_b.points_px))
     if len(traced) < 2 or options.optimizer != "palm" or not options.self_calibration:
         return cal
     matched_a, matched_b = [], []
@@ -169,6 +182,9 @@ def reconstruct_tree(
     options = options or ReconstructionOptions()
     if not seeds.segments:
         raise PipelineError("seeds: no segment to reconstruct (segments is empty)")
+    if options.calibration not in CALIBRATION_CHOICES:
+        raise PipelineError(f"unknown calibration {options.calibration!r} (use one of "
+                            f"{', '.join(CALIBRATION_CHOICES)})")
     _check_separation(angio_a.geometry, angio_b.geometry, options.allow_close_views)
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
@@ -179,6 +195,8 @@ def reconstruct_tree(
                       compute_vesselness(angio_b.image, pixel_mm=view_b.pixel_mm_at_isocenter))
     traced = [_trace_both(angio_a, angio_b, seg, vesselness, options, len(seeds.segments))
               for seg in seeds.segments]
+    if len(traced) > 1:
+        traced = _mark_tree_overlaps(traced)
     timings["trace"] = _ms(t0)
     if len(seeds.segments) == 1:  # exactly the one-segment reconstruction
         rec = reconstruct_pair(angio_a, angio_b, seeds, replace(options, segment=0), progress,
@@ -192,6 +210,9 @@ def reconstruct_tree(
         timings["calibrate"] = _ms(t1)
         branches = []
         per_branch = replace(options, self_calibration=False)
+        traced = [traced[k] if seg.parent is None else _origin_from_the_clear_view(
+            traced[k], traced[seeds.segment_index(seg.parent)], view_a, calibration.view_b)
+            for k, seg in enumerate(seeds.segments)]
         for k, seg in enumerate(seeds.segments):
             _notify(progress, f"segment {seg.name}", 0.3 + 0.5 * k / len(seeds.segments))
             junction = None
@@ -199,11 +220,15 @@ def reconstruct_tree(
                 parent = branches[seeds.segment_index(seg.parent)]
                 junction = Junction(parent.centerline_3d.X_world,
                                     np.sqrt(parent.surface.sections.area_mm2 / np.pi))
+            # a joined branch is measured from its carina on, which the whole branch's
+            # intervals do not describe: without the posterior none are sampled
             rec = reconstruct_pair(angio_a, angio_b, seeds, replace(per_branch, segment=k),
-                                   None, vesselness, traced=traced[k], calibration=calibration,
-                                   junction=junction)
+                                   None, vesselness, traced=traced[k],
+                                   calibration=calibration if junction is None
+                                   else replace(calibration, posterior=None),
+                                   junction=junction, best_view=False)
             if junction is not None:
-                rec = _from_carina(rec, junction)
+                rec = _from_carina(replace(rec, calibration=calibration), junction)
             branches.append(rec)
         branches = _best_views_among_branches(branches)
     _notify(progress, "building the tree's surface", 0.85)
@@ -229,12 +254,123 @@ def reconstruct_tree(
 def _best_views_among_branches(branches: list[Reconstruction]) -> list[Reconstruction]:
     """Each branch with its best next view (recon.optimal_view) chosen with the tree's other
     branches as the vessels it must not overlap."""
-    shapes = [(rec.centerline_3d.X_world,
-               np.interp(rec.centerline_3d.s_mm, rec.profile.s_mm,
-                         rec.profile.diameter_smooth_mm) / 2.0) for rec in branches]
+    shapes = [(rec.centerline_3d.X_world, rec.profile.smooth_radius_at(rec.centerline_3d.s_mm))
+              for rec in branches]
     return [replace(rec, optimal_view=optimal_view(
         *shapes[k], rec.view_a, {"a": rec.view_a, "b": rec.view_b},
         others=tuple(shapes[:k] + shapes[k + 1:]))) for k, rec in enumerate(branches)]
+
+
+#: Reliability given to a traced point whose lumen another segment's lumen overlaps in
+#: that view (below recon.triangulation.OVERLAP_RELIABILITY: the other view's radius is
+#: used there when that view is clear).
+TREE_OVERLAP_RELIABILITY = 0.05
+#: Two lumen discs overlap when their centres are closer than this fraction of the sum of
+#: their radii (1: touching; lumens that only touch or graze leave the fit nearly intact).
+TREE_OVERLAP_FRACTION = 0.5
+
+
+def _overlapped(cl: Centerline2D, others: list[Centerline2D]) -> np.ndarray:
+    """(N,) bool: the points of ``cl`` whose lumen disc (centre, radius px) meets the lumen
+    disc of a point of another segment's trace in the same view."""
+    hit = np.zeros(len(cl.points_px), dtype=bool)
+    for other in others:
+        gap = np.linalg.norm(cl.points_px[:, None, :] - other.points_px[None, :, :], axis=2)
+        reach = TREE_OVERLAP_FRACTION * (cl.radius_px[:, None] + other.radius_px[None, :])
+        hit |= np.any(gap < reach, axis=1)
+    return hit
+
+
+def _mark_tree_overlaps(traced: list[tuple[Centerline2D, Centerline2D]]
+                        ) -> list[tuple[Centerline2D, Centerline2D]]:
+    """Every segment's traces with the reliability lowered where another segment of the
+    tree overlaps its lumen in that view, so that the view where the two lumens are
+    apart gives the radius there (recon.triangulation, step 5)."""
+    out = []
+    for k, pair in enumerate(traced):
+        marked = []
+        for v, cl in enumerate(pair):
+            hit = _overlapped(cl, [traced[j][v] for j in range(len(traced)) if j != k])
+            rel = np.where(hit, np.minimum(cl.reliability, TREE_OVERLAP_RELIABILITY),
+                           cl.reliability)
+            marked.append(replace(cl, reliability=rel))
+        out.append((marked[0], marked[1]))
+    return out
+
+
+#: Consecutive points that must be clear of the parent's lumen where a branch's trace
+#: leaves it (:func:`_first_clear`).
+CLEAR_RUN = 3
+
+
+def _first_clear(cl: Centerline2D, parent: Centerline2D) -> int | None:
+    """Index of the first of :data:`CLEAR_RUN` consecutive points of a branch's trace whose
+    lumen is clear of the parent's (centre farther from the parent's trace than the two
+    radii together), or None when the trace never clears it."""
+    gap = np.linalg.norm(cl.points_px[:, None, :] - parent.points_px[None, :, :], axis=2)
+    nearest = np.argmin(gap, axis=1)
+    clear = gap[np.arange(len(gap)), nearest] >= parent.radius_px[nearest] + cl.radius_px
+    run = np.convolve(clear.astype(int), np.ones(CLEAR_RUN, dtype=int), "valid") == CLEAR_RUN
+    return int(np.flatnonzero(run)[0]) if run.any() else None
+
+
+def _origin_from_the_clear_view(pair: tuple[Centerline2D, Centerline2D],
+                                parent: tuple[Centerline2D, Centerline2D],
+                                view_a: ViewGeometry, view_b: ViewGeometry
+                                ) -> tuple[Centerline2D, Centerline2D]:
+    """A branch's traces with the origin stretch of a view where the branch runs inside
+    its parent's projected lumen redrawn from the other view.
+
+    In view v the trace is taken to run along the parent's lumen when it needs more
+    than twice the two lumens' width (parent's radius + branch's, px, at the origin)
+    of arc to become clear of it (:func:`_first_clear`, at point S). If the other
+    view's trace is clear where it meets the epipolar line of S (point S'), the
+    stretch is redrawn from that view: the 3D points on the other view's rays
+    through its trace from the origin to S', their distance from its source
+    interpolated by arc length between the triangulated origin and the
+    triangulated (S, S'), projected into view v and resampled to the stretch's
+    point count. Their reliability is lowered, so the radius there is the other
+    view's (recon.triangulation, step 5).
+    """
+    views = (view_a, view_b)
+    out = list(pair)
+    seps = [_first_clear(pair[v], parent[v]) for v in (0, 1)]
+    if seps[0] is None or seps[1] is None:
+        return pair
+    for v in (0, 1):
+        o = 1 - v
+        cl, other = pair[v], pair[o]
+        i_sep = seps[v]
+        n0 = int(np.argmin(np.linalg.norm(parent[v].points_px - cl.points_px[0], axis=1)))
+        width_px = float(parent[v].radius_px[n0] + cl.radius_px[0])
+        if arclength(cl.points_px)[i_sep] < 2.0 * width_px:
+            continue  # the branch leaves its parent as a branch does: nothing to redraw
+        src_v = views[v].source_world
+        ray = views[v].ray_directions(cl.points_px[i_sep][None])[0]
+        reach = views[v].sod_mm * np.linspace(0.7, 1.3, 400)
+        line = views[o].project(src_v + reach[:, None] * ray)
+        dist = point_polyline_distance(other.points_px, line)
+        j_sep = int(np.argmin(dist[: max(len(dist) // 2, 4)]))
+        if j_sep <= seps[o] or dist[j_sep] > 2.0:
+            continue  # the other view is inside the parent's lumen there too
+        ends_v, ends_o = cl.points_px[[0, i_sep]], other.points_px[[0, j_sep]]
+        X = triangulate(*((ends_v, ends_o) if v == 0 else (ends_o, ends_v)), view_a, view_b)
+        src_o = views[o].source_world
+        s_o = arclength(other.points_px[: j_sep + 1])
+        f = s_o / max(float(s_o[-1]), 1e-9)
+        d0, d1 = np.linalg.norm(X - src_o, axis=1)
+        X_o = src_o + ((1.0 - f) * d0 + f * d1)[:, None] * views[o].ray_directions(
+            other.points_px[: j_sep + 1])
+        q = views[v].project(X_o)
+        s_q = arclength(q)
+        t = np.linspace(0.0, float(s_q[-1]), i_sep + 1)
+        points = cl.points_px.copy()
+        points[: i_sep + 1] = np.column_stack([np.interp(t, s_q, q[:, 0]),
+                                               np.interp(t, s_q, q[:, 1])])
+        reliability = cl.reliability.copy()
+        reliability[: i_sep + 1] = np.minimum(reliability[: i_sep + 1], TREE_OVERLAP_RELIABILITY)
+        out[v] = replace(cl, points_px=points, reliability=reliability)
+    return out[0], out[1]
 
 
 def _trace_both(angio_a: Angiogram, angio_b: Angiogram, seg: Segment,
@@ -259,7 +395,8 @@ def _ms(since: float) -> float:
 
 def _from_carina(rec: Reconstruction, junction: Junction) -> Reconstruction:
     """A branch's profile and measurements from its carina on (the stretch before
-    lies inside the parent's lumen); arc lengths stay the branch's own."""
+    lies inside the parent's lumen); arc lengths stay the branch's own. A joined
+    branch has no 95 % intervals (the whole branch's would not describe these)."""
     cl = rec.centerline_3d
     s_c = carina_s_mm(cl.X_world, junction.parent_X_world, junction.parent_radius_mm)
     keep = cl.s_mm >= s_c

@@ -19,6 +19,7 @@ from recon.pipeline import reconstruct_pair
 from recon.synth import make_phantom
 from recon.synth.tree import make_tree_case, tree_seeds
 from recon.tree import reconstruct_tree
+from recon.triangulation import point_polyline_distance
 
 
 @pytest.fixture(scope="module")
@@ -140,7 +141,7 @@ def test_each_branchs_best_view_keeps_the_other_branches_off_it(tree_case):
     _, tree = tree_case
     for rec in tree.branches:
         c = rec.centerline_3d
-        radius = np.interp(c.s_mm, rec.profile.s_mm, rec.profile.diameter_smooth_mm) / 2
+        radius = rec.profile.smooth_radius_at(c.s_mm)
         alone = optimal_view(c.X_world, radius, rec.view_a)
         chosen = rec.optimal_view
         assert chosen is not None
@@ -151,3 +152,143 @@ def test_each_branchs_best_view_keeps_the_other_branches_off_it(tree_case):
                        for v in (chosen, alone))
         assert score[best] <= score[other] + 1e-9
         assert chosen.overlap_pct == pytest.approx(chosen.overlap_map_pct[best])
+
+
+@pytest.fixture(scope="module")
+def small_tree():
+    """The demo phantom with one clicked branch: a two-segment tree, quick to reconstruct."""
+    case = make_phantom("static", 7)
+    seeds, _, _ = tree_seeds(np.random.default_rng(1), case)
+    assert len(seeds.segments) == 2
+    return case_angiograms(case), seeds
+
+
+@pytest.mark.parametrize("mode", ["header", "supported", "curves"])
+def test_the_tree_calibrates_by_the_rule_a_single_segment_uses(small_tree, mode):
+    """``ReconstructionOptions.calibration`` reaches the tree: the tree's view B is what
+    :func:`recon.pipeline.calibrate_view_b` makes of the tree-wide features under that
+    rule, and "header" leaves B at its header pose."""
+    from recon.pipeline import ReconstructionOptions, calibrate_view_b
+    from recon.tree import _tree_features
+
+    (a, b), seeds = small_tree
+    options = ReconstructionOptions(calibration=mode)
+    tree = reconstruct_tree(a, b, seeds, options)
+    traced = [(rec.centerline_a, rec.centerline_b) for rec in tree.branches]
+    feat_a, feat_b = _tree_features(seeds, traced)
+    expected = calibrate_view_b(a.geometry, b.geometry, feat_a, feat_b, options,
+                                (traced[0][0].points_px, traced[0][1].points_px))
+    assert tree.calibration.correction == expected.correction
+    np.testing.assert_allclose(tree.first.view_b.source_world, expected.view_b.source_world,
+                               atol=1e-9)
+    if mode == "header":
+        assert tree.calibration.correction == "header"
+        np.testing.assert_allclose(tree.first.view_b.source_world, b.geometry.source_world,
+                                   atol=1e-9)
+    if mode == "curves":
+        assert tree.calibration.correction == "curves"
+    assert all(rec.view_b is tree.first.view_b for rec in tree.branches)
+    assert all(rec.calibration is tree.calibration for rec in tree.branches)
+    assert tree.first.intervals is not None  # the rule's pose posterior gives intervals
+    # a joined branch is measured from its carina: the whole branch's intervals would
+    # not describe it, so it has none
+    assert all(rec.intervals is None for rec in tree.branches[1:])
+
+
+def test_an_unknown_calibration_rule_is_refused_before_tracing(small_tree, monkeypatch):
+    import recon.tree
+    from recon.pipeline import PipelineError, ReconstructionOptions
+
+    def no_tracing(*args, **kwargs):
+        raise AssertionError("traced before the options were checked")
+
+    monkeypatch.setattr(recon.tree, "_trace_both", no_tracing)
+    (a, b), seeds = small_tree
+    with pytest.raises(PipelineError, match="unknown calibration 'sideways'"):
+        reconstruct_tree(a, b, seeds, ReconstructionOptions(calibration="sideways"))
+
+
+def test_each_branch_gets_its_best_view_computed_once(small_tree, monkeypatch):
+    """The tree chooses every branch's view among the others, so reconstruct_pair's
+    own choice (the branch alone) is skipped: one optimal_view call per branch."""
+    import recon.pipeline
+    import recon.tree
+
+    calls = []
+    real = recon.tree.optimal_view
+
+    def counting(*args, **kwargs):
+        calls.append(kwargs.get("others"))
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(recon.tree, "optimal_view", counting)
+    monkeypatch.setattr(recon.pipeline, "optimal_view", counting)
+    (a, b), seeds = small_tree
+    tree = reconstruct_tree(a, b, seeds)
+    assert len(calls) == len(seeds.segments)
+    assert all(others is not None and len(others) == len(seeds.segments) - 1 for others in calls)
+    assert all(rec.optimal_view is not None for rec in tree.branches)
+
+
+def test_a_trace_is_untrusted_where_another_segment_overlaps_its_lumen_in_that_view():
+    """Lumens that overlap in one view (centres closer than half the radii's sum) lower
+    that view's reliability there and only there; the other view stays as traced."""
+    from recon.tree import TREE_OVERLAP_RELIABILITY, _mark_tree_overlaps
+    from recon.types import Centerline2D
+
+    def trace(points, radius):
+        n = len(points)
+        return Centerline2D(points_px=np.asarray(points, dtype=float),
+                            radius_px=np.full(n, radius), brightness=np.ones(n))
+
+    x = np.arange(0.0, 100.0)
+    main_a = trace(np.column_stack([x, np.full(100, 50.0)]), 4.0)
+    main_b = trace(np.column_stack([x, np.full(100, 50.0)]), 4.0)
+    # in A the branch crosses the main at x = 40 (vertical); in B it stays 20 px away
+    branch_a = trace(np.column_stack([np.full(60, 40.0), np.arange(20.0, 80.0)]), 3.0)
+    branch_b = trace(np.column_stack([np.arange(20.0, 80.0), np.full(60, 70.0)]), 3.0)
+    marked = _mark_tree_overlaps([(main_a, main_b), (branch_a, branch_b)])
+    low = marked[0][0].reliability <= TREE_OVERLAP_RELIABILITY
+    np.testing.assert_array_equal(np.flatnonzero(low), np.arange(37, 44))  # |x - 40| < 3.5
+    low_branch = marked[1][0].reliability <= TREE_OVERLAP_RELIABILITY
+    np.testing.assert_array_equal(np.flatnonzero(low_branch), np.arange(27, 34))  # |y - 50| < 3.5
+    assert np.all(marked[0][1].reliability == 1.0) and np.all(marked[1][1].reliability == 1.0)
+
+
+def test_a_branch_origin_traced_along_its_parent_is_redrawn_from_the_clear_view():
+    """A branch leaving its parent at 25 deg in 3D; view B's trace of it runs 6 mm along
+    the parent's centre before it crosses over (as a trace through merged lumens does),
+    view A's follows the branch. The redrawn B stretch lies on the branch's true
+    projection (within 1 px), far closer than the trace it replaces; A is unchanged."""
+    from recon.tree import TREE_OVERLAP_RELIABILITY, _origin_from_the_clear_view
+    from recon.types import Centerline2D
+
+    case = make_phantom("static", 7, render=False)
+    view_a, view_b = case.view_a, case.view_b_true
+    centre = np.asarray(case.truth.segment_X_world[len(case.truth.segment_X_world) // 2])
+    u = np.array([1.0, 0.0, 0.0])
+    w = np.array([np.cos(np.radians(25.0)), np.sin(np.radians(25.0)), 0.0])
+    s = np.arange(0.0, 30.0, 0.1)[:, None]
+    parent_X = centre + (s - 10.0) * u
+    branch_X = centre + s * w
+
+    def trace(view, X, radius_mm):
+        p = view.project(X)
+        r = np.full(len(p), radius_mm / view.pixel_mm_at_isocenter)
+        return Centerline2D(points_px=p, radius_px=r, brightness=np.ones(len(p)))
+
+    parent = (trace(view_a, parent_X, 1.5), trace(view_b, parent_X, 1.5))
+    true_b = view_b.project(branch_X)
+    # B's trace: along the parent's centre for 6 mm, then a straight jump onto the branch
+    along = centre + s[s[:, 0] <= 6.0] * u
+    rejoin = np.flatnonzero(s[:, 0] >= 9.0)[0]
+    bad = np.vstack([along, branch_X[rejoin:]])
+    branch = (trace(view_a, branch_X, 1.0), trace(view_b, bad, 1.0))
+    a_new, b_new = _origin_from_the_clear_view(branch, parent, view_a, view_b)
+    assert a_new is branch[0]
+    changed = np.flatnonzero(np.any(b_new.points_px != branch[1].points_px, axis=1))
+    assert changed.size > 10
+    before = np.max(point_polyline_distance(branch[1].points_px[changed], true_b))
+    after = np.max(point_polyline_distance(b_new.points_px[changed], true_b))
+    assert before > 3.0 and after < 1.0, (before, after)
+    assert np.all(b_new.reliability[changed] <= TREE_OVERLAP_RELIABILITY)
