@@ -375,9 +375,14 @@ def _ball_voxels(
     order = np.argsort(norm, kind="stable")
     grid, norm = grid[order], norm[order]
     counts = np.searchsorted(norm, np.maximum(radius_vox, -1.0), side="right")
-    owner = np.repeat(np.arange(len(base)), counts)
     within = np.arange(int(counts.sum())) - np.repeat(np.cumsum(counts) - counts, counts)
-    idx = np.clip(base[owner] + grid[within], 0, np.asarray(shape) - 1)
+    dims = np.asarray(shape)
+    if np.all(base.min(axis=0) >= r_max) and np.all(base.max(axis=0) + r_max < dims):
+        # no ball leaves the grid: flat index of the centre plus the offset's
+        strides = np.array([shape[1] * shape[2], shape[2], 1], dtype=np.int64)
+        return np.repeat(base @ strides, counts) + (grid @ strides)[within]
+    owner = np.repeat(np.arange(len(base)), counts)
+    idx = np.clip(base[owner] + grid[within], 0, dims - 1)
     return np.ravel_multi_index(idx.T, shape)
 
 
@@ -562,7 +567,8 @@ def build_surface(
     grid[:, :, [0, -1]] = band
 
     verts, faces = _marching_cubes_on_blocks(grid, shell)
-    mesh = trimesh.Trimesh(vertices=verts * voxel + lo, faces=faces, process=True)
+    # the blocks' copies of a shared vertex are welded already: no merging to do
+    mesh = trimesh.Trimesh(vertices=verts * voxel + lo, faces=faces, process=False)
     mesh = _repair(mesh)
     return SurfaceResult(mesh=mesh, sections=sections, point_cloud=cloud, voxel_mm=voxel)
 
