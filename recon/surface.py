@@ -484,18 +484,39 @@ def _repair(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
     """Largest component, no degenerate faces, outward winding."""
     mesh.update_faces(mesh.nondegenerate_faces())
     mesh.remove_unreferenced_vertices()
-    labels = trimesh.graph.connected_component_labels(mesh.face_adjacency, len(mesh.faces))
+    adjacency, closed, consistent = _shared_edges(mesh.faces)
+    n_faces = len(mesh.faces)
+    labels = trimesh.graph.connected_component_labels(adjacency, n_faces)
     if labels.size and labels.max() > 0:
         keep = labels == np.bincount(labels).argmax()
         mesh.update_faces(keep)
         mesh.remove_unreferenced_vertices()
-    if not mesh.is_watertight:
+        _, closed, consistent = _shared_edges(mesh.faces)
+    if not closed:
         trimesh.repair.fill_holes(mesh)
-    if not mesh.is_winding_consistent:
+    if not (closed and consistent) and not mesh.is_winding_consistent:
         trimesh.repair.fix_winding(mesh)
     if signed_volume(mesh.vertices, mesh.faces) < 0:
         mesh.invert()
     return mesh
+
+
+def _shared_edges(faces: NDArray[np.int64]) -> tuple[NDArray[np.int64], bool, bool]:
+    """Pairs (P, 2) of faces (F, 3) sharing an edge that exactly two faces use; closed (all
+    edges so); consistently wound (each such edge run both ways): trimesh's ``face_adjacency``,
+    ``is_watertight``, ``is_winding_consistent`` from one sort of edge keys, not hashed rows."""
+    edges = faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2).astype(np.int64)  # face f: rows 3f..
+    lo, hi = np.minimum(edges[:, 0], edges[:, 1]), np.maximum(edges[:, 0], edges[:, 1])
+    key = lo * (int(faces.max()) + 1 if faces.size else 1) + hi
+    order = np.argsort(key, kind="stable")
+    sorted_key = key[order]
+    starts = np.flatnonzero(np.concatenate([[True], sorted_key[1:] != sorted_key[:-1]]))
+    counts = np.diff(np.concatenate([starts, [len(key)]]))
+    first, second = order[starts[counts == 2]], order[starts[counts == 2] + 1]
+    closed = bool(2 * len(first) == len(edges))
+    consistent = bool(np.all(edges[first, 1] == edges[second, 0]))
+    pairs = np.stack([first // 3, second // 3], axis=1)
+    return pairs[pairs[:, 0] != pairs[:, 1]], closed, consistent
 
 
 def signed_volume(vertices: FloatArray, faces: NDArray[np.int64]) -> float:
@@ -567,8 +588,7 @@ def build_surface(
     grid[:, :, [0, -1]] = band
 
     verts, faces = _marching_cubes_on_blocks(grid, shell)
-    # the blocks' copies of a shared vertex are welded already: no merging to do
-    mesh = trimesh.Trimesh(vertices=verts * voxel + lo, faces=faces, process=False)
+    mesh = trimesh.Trimesh(vertices=verts * voxel + lo, faces=faces, process=False)  # welded
     mesh = _repair(mesh)
     return SurfaceResult(mesh=mesh, sections=sections, point_cloud=cloud, voxel_mm=voxel)
 

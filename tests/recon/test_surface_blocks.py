@@ -77,3 +77,27 @@ def test_signed_volume_agrees_with_trimesh_and_tells_the_winding():
     assert signed_volume(sphere.vertices, sphere.faces) == pytest.approx(sphere.volume, rel=1e-12)
     assert signed_volume(sphere.vertices, sphere.faces[:, ::-1]) == pytest.approx(-sphere.volume,
                                                                                   rel=1e-12)
+
+
+def _as_set(pairs: np.ndarray) -> set[tuple[int, int]]:
+    return {tuple(int(i) for i in row) for row in np.sort(pairs, axis=1)}
+
+
+@pytest.mark.parametrize("case", ["tube", "open", "flipped", "two pieces"])
+def test_shared_edges_agree_with_trimesh(case: str) -> None:
+    grid, wall = _bent_tube_field((30, 34, 17), band=2.0, wall_halfwidth=2.0)
+    tube = trimesh.Trimesh(*surface._marching_cubes_on_blocks(grid, wall), process=False)
+    box = trimesh.creation.box()
+    flipped = box.faces.copy()
+    flipped[3] = flipped[3][::-1]
+    mesh = {"tube": tube,
+            "open": trimesh.Trimesh(box.vertices, box.faces[:-1], process=False),
+            "flipped": trimesh.Trimesh(box.vertices, flipped, process=False),
+            "two pieces": trimesh.util.concatenate(
+                [box, box.copy().apply_translation([5.0, 0.0, 0.0])])}[case]
+    pairs, closed, consistent = surface._shared_edges(np.asarray(mesh.faces))
+    assert _as_set(pairs) == _as_set(mesh.face_adjacency)
+    assert closed == mesh.is_watertight
+    assert consistent == mesh.is_winding_consistent
+    assert (closed, consistent) == {"tube": (True, True), "open": (False, True),
+                                    "flipped": (True, False), "two pieces": (True, True)}[case]
