@@ -430,46 +430,57 @@ def _shell_voxels(
 
 
 def _marching_cubes_on_blocks(
-    grid: NDArray[np.float32], wall: NDArray[np.int64]
+    shape: tuple[int, int, int], band: float, wall: NDArray[np.int64],
+    wall_values: FloatArray, inner: NDArray[np.int64],
 ) -> tuple[FloatArray, NDArray[np.int64]]:
-    """Marching cubes (skimage's Lewiner) of the 0-level of ``grid``, on the blocks the
-    surface crosses only.
-
-    The cells are split into blocks of :data:`_MC_BLOCK`^3; the blocks that have a
-    corner among the ``wall`` voxels (flat indices; every other voxel is a constant
-    +-band, so a sign change needs a wall voxel) and both signs are run one by one,
-    and the vertex that two neighbouring blocks both put on their shared grid edge
-    is welded into one. The result is the mesh of one call over the whole grid:
-    each cell's triangles depend on its 8 corners only.
-
-    Returns (vertices (V, 3) in voxel index units, faces (F, 3)).
-    """
-    n_cells = np.asarray(grid.shape) - 1
+    """Marching cubes (skimage's Lewiner) of the 0-level of a grid of ``shape`` holding
+    ``wall_values`` at the ``wall`` voxels, -``band`` at the ``inner`` ones (flat indices),
+    +``band`` elsewhere and on its outer layer, on the blocks the surface crosses only
+    (the grid is never built): of the blocks of :data:`_MC_BLOCK`^3 cells, those with a
+    corner among the ``wall`` voxels (a sign change needs one) get their corners' values,
+    those with both signs are run one by one, and the vertex two neighbouring blocks put
+    on their shared edge is welded into one: the mesh of one call over the whole grid
+    (a cell's triangles depend on its 8 corners). Returns (vertices (V, 3) in voxel
+    index units, faces (F, 3))."""
+    n_cells = np.asarray(shape) - 1
     n_blocks = -(-n_cells // _MC_BLOCK)
     occupied = np.zeros(n_blocks, dtype=bool)
-    corner = np.unravel_index(wall, grid.shape)
+    corner = np.unravel_index(wall, shape)
     block_of = [np.minimum(c // _MC_BLOCK, n - 1) for c, n in zip(corner, n_blocks, strict=True)]
     occupied[tuple(block_of)] = True
     # A voxel on a block's lower face is also a corner of the cells of the block below.
     occupied[:-1] |= occupied[1:]
     occupied[:, :-1] |= occupied[:, 1:]
     occupied[:, :, :-1] |= occupied[:, :, 1:]
+    starts = np.argwhere(occupied)
+    slot = np.full(n_blocks, -1, dtype=np.int64)
+    slot[tuple(starts.T)] = np.arange(len(starts))
+    corners = np.full((len(starts),) + (_MC_BLOCK + 1,) * 3, band, dtype=np.float32)
+    for flat, values in ((inner, np.full(len(inner), -band)), (wall, wall_values)):
+        ijk = np.stack(np.unravel_index(flat, shape), axis=1)
+        keep = np.all((ijk > 0) & (ijk < n_cells), axis=1)  # the outer layer stays +band
+        ijk, values = ijk[keep], np.asarray(values, dtype=np.float32)[keep]
+        block, local = ijk // _MC_BLOCK, ijk % _MC_BLOCK
+        for use_below in np.ndindex(2, 2, 2):  # also the last corner of the block below
+            below = np.asarray(use_below, dtype=bool)
+            ok = np.all(~below | ((local == 0) & (block > 0)), axis=1)
+            b, loc = block[ok] - below, np.where(below, _MC_BLOCK, local[ok])
+            k = slot[tuple(b.T)]
+            on = k >= 0
+            corners[k[on], loc[on, 0], loc[on, 1], loc[on, 2]] = values[ok][on]
     verts: list[FloatArray] = []
     faces: list[NDArray[np.int64]] = []
-    n_verts = 0
-    for start in np.argwhere(occupied) * _MC_BLOCK:
-        stop = np.minimum(start + _MC_BLOCK, n_cells) + 1  # corners of the block's cells
-        sub = grid[start[0]:stop[0], start[1]:stop[1], start[2]:stop[2]]
+    for k, start in enumerate(starts * _MC_BLOCK):
+        size = np.minimum(start + _MC_BLOCK, n_cells) + 1 - start  # corners of its cells
+        sub = corners[k, :size[0], :size[1], :size[2]]
         if not sub.min() < 0.0 < sub.max():
             continue
         v, f, _, _ = marching_cubes(sub, level=0.0)
         verts.append(v.astype(np.float64) + start)
-        faces.append(f.astype(np.int64) + n_verts)
-        n_verts += len(v)
+        faces.append(f.astype(np.int64) + sum(len(u) for u in verts[:-1]))
     if not verts:
         raise ValueError("the distance field has no surface (no sign change on the grid)")
-    all_verts = np.concatenate(verts)
-    all_faces = np.concatenate(faces)
+    all_verts, all_faces = np.concatenate(verts), np.concatenate(faces)
     # Weld: a vertex shared by 2-4 blocks takes the lowest index of its copies.
     pairs = cKDTree(all_verts).query_pairs(_WELD_TOL, output_type="ndarray")
     label = np.arange(len(all_verts))
@@ -485,8 +496,7 @@ def _repair(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
     mesh.update_faces(mesh.nondegenerate_faces())
     mesh.remove_unreferenced_vertices()
     adjacency, closed, consistent = _shared_edges(mesh.faces)
-    n_faces = len(mesh.faces)
-    labels = trimesh.graph.connected_component_labels(adjacency, n_faces)
+    labels = trimesh.graph.connected_component_labels(adjacency, len(mesh.faces))
     if labels.size and labels.max() > 0:
         keep = labels == np.bincount(labels).argmax()
         mesh.update_faces(keep)
@@ -571,23 +581,14 @@ def build_surface(
 
     band = 2.0 * voxel  # exact distances within this of the wall; the rest is only a sign
     shell, inner = _shell_voxels(sections, shape, lo, voxel, band)
-    grid = np.full(int(np.prod(shape)), band, dtype=np.float32)
-    grid[inner] = -band
+    wall_values = np.empty(len(shell), dtype=np.float32)
     tree = cKDTree(sections.centers)
     for start in range(0, len(shell), _CHUNK):
-        chunk = shell[start : start + _CHUNK]
-        ijk = np.stack(np.unravel_index(chunk, shape), axis=1)
-        grid[chunk] = _tube_sdf(lo + ijk * voxel, sections, tree)
-    # Nudge exact zeros off the level (only the shell holds values other than +-band).
-    tiny = np.float32(1e-4 * voxel)
-    grid[shell[np.abs(grid[shell]) < tiny]] = tiny
-    grid = grid.reshape(shape)
-    # Keep the outer layer outside so the surface closes.
-    grid[[0, -1], :, :] = band
-    grid[:, [0, -1], :] = band
-    grid[:, :, [0, -1]] = band
-
-    verts, faces = _marching_cubes_on_blocks(grid, shell)
+        ijk = np.stack(np.unravel_index(shell[start : start + _CHUNK], shape), axis=1)
+        wall_values[start : start + _CHUNK] = _tube_sdf(lo + ijk * voxel, sections, tree)
+    tiny = np.float32(1e-4 * voxel)  # exact zeros nudged off the level
+    wall_values[np.abs(wall_values) < tiny] = tiny
+    verts, faces = _marching_cubes_on_blocks(shape, band, shell, wall_values, inner)
     mesh = trimesh.Trimesh(vertices=verts * voxel + lo, faces=faces, process=False)  # welded
     mesh = _repair(mesh)
     return SurfaceResult(mesh=mesh, sections=sections, point_cloud=cloud, voxel_mm=voxel)
