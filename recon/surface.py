@@ -420,28 +420,24 @@ def _shell_voxels(
     r_out = (np.sqrt((big + margin) ** 2 + half_step**2) + slack) / voxel
     r_in_mm = small - margin - slack
     r_in = np.where(r_in_mm > half_step, np.sqrt(np.maximum(r_in_mm**2 - half_step**2, 0)), -1)
-    outer = np.zeros(int(np.prod(shape)), dtype=bool)
-    outer[_ball_voxels(base, r_out, shape)] = True
-    inner = np.zeros_like(outer)
+    shell = np.zeros(int(np.prod(shape)), dtype=bool)
+    shell[_ball_voxels(base, r_out, shape)] = True
     has_inner = r_in > 0
-    if np.any(has_inner):
-        inner[_ball_voxels(base[has_inner], r_in[has_inner] / voxel, shape)] = True
-    return np.flatnonzero(outer & ~inner), np.flatnonzero(inner)
+    inner = (np.unique(_ball_voxels(base[has_inner], r_in[has_inner] / voxel, shape))
+             if np.any(has_inner) else np.zeros(0, dtype=np.int64))
+    shell[inner] = False
+    return np.flatnonzero(shell), inner
 
 
 def _marching_cubes_on_blocks(
     shape: tuple[int, int, int], band: float, wall: NDArray[np.int64],
     wall_values: FloatArray, inner: NDArray[np.int64],
 ) -> tuple[FloatArray, NDArray[np.int64]]:
-    """Marching cubes (skimage's Lewiner) of the 0-level of a grid of ``shape`` holding
-    ``wall_values`` at the ``wall`` voxels, -``band`` at the ``inner`` ones (flat indices),
-    +``band`` elsewhere and on its outer layer, on the blocks the surface crosses only
-    (the grid is never built): of the blocks of :data:`_MC_BLOCK`^3 cells, those with a
-    corner among the ``wall`` voxels (a sign change needs one) get their corners' values,
-    those with both signs are run one by one, and the vertex two neighbouring blocks put
-    on their shared edge is welded into one: the mesh of one call over the whole grid
-    (a cell's triangles depend on its 8 corners). Returns (vertices (V, 3) in voxel
-    index units, faces (F, 3))."""
+    """Marching cubes (skimage's Lewiner) of the 0-level of a grid of ``shape``: ``wall_values``
+    at the ``wall`` voxels, -``band`` at the ``inner`` ones (flat indices), +``band`` elsewhere
+    and on its outer layer. Never built whole: the blocks of :data:`_MC_BLOCK`^3 cells with a
+    ``wall`` corner get their corners, those with both signs are run one by one, a vertex two
+    blocks share is welded: one call's mesh (vertices (V, 3) in voxels, faces (F, 3))."""
     n_cells = np.asarray(shape) - 1
     n_blocks = -(-n_cells // _MC_BLOCK)
     occupied = np.zeros(n_blocks, dtype=bool)
@@ -453,23 +449,27 @@ def _marching_cubes_on_blocks(
     occupied[:, :-1] |= occupied[:, 1:]
     occupied[:, :, :-1] |= occupied[:, :, 1:]
     starts = np.argwhere(occupied)
-    slot = np.full(n_blocks, -1, dtype=np.int64)
+    slot = np.full(n_blocks, -1, dtype=np.int64)  # each occupied block's index in corners
     slot[tuple(starts.T)] = np.arange(len(starts))
     corners = np.full((len(starts),) + (_MC_BLOCK + 1,) * 3, band, dtype=np.float32)
+    side = _MC_BLOCK + 1
+    block_stride = np.array([n_blocks[1] * n_blocks[2], n_blocks[2], 1])
+    corner_stride = np.array([side * side, side, 1])
     for flat, values in ((inner, np.full(len(inner), -band)), (wall, wall_values)):
         ijk = np.stack(np.unravel_index(flat, shape), axis=1)
         keep = np.all((ijk > 0) & (ijk < n_cells), axis=1)  # the outer layer stays +band
         ijk, values = ijk[keep], np.asarray(values, dtype=np.float32)[keep]
         block, local = ijk // _MC_BLOCK, ijk % _MC_BLOCK
-        for use_below in np.ndindex(2, 2, 2):  # also the last corner of the block below
+        can = (local == 0) & (block > 0)  # on a block's lower face: the block below's too
+        for use_below in np.ndindex(2, 2, 2):
             below = np.asarray(use_below, dtype=bool)
-            ok = np.all(~below | ((local == 0) & (block > 0)), axis=1)
-            b, loc = block[ok] - below, np.where(below, _MC_BLOCK, local[ok])
-            k = slot[tuple(b.T)]
-            on = k >= 0
-            corners[k[on], loc[on, 0], loc[on, 1], loc[on, 2]] = values[ok][on]
+            sel = np.flatnonzero(np.all(can | ~below, axis=1))
+            k = slot.reshape(-1)[(block[sel] - below) @ block_stride]
+            at = k * side**3 + np.where(below, _MC_BLOCK, local[sel]) @ corner_stride
+            corners.reshape(-1)[at[k >= 0]] = values[sel][k >= 0]
     verts: list[FloatArray] = []
     faces: list[NDArray[np.int64]] = []
+    n_verts = 0
     for k, start in enumerate(starts * _MC_BLOCK):
         size = np.minimum(start + _MC_BLOCK, n_cells) + 1 - start  # corners of its cells
         sub = corners[k, :size[0], :size[1], :size[2]]
@@ -477,7 +477,8 @@ def _marching_cubes_on_blocks(
             continue
         v, f, _, _ = marching_cubes(sub, level=0.0)
         verts.append(v.astype(np.float64) + start)
-        faces.append(f.astype(np.int64) + sum(len(u) for u in verts[:-1]))
+        faces.append(f.astype(np.int64) + n_verts)
+        n_verts += len(v)
     if not verts:
         raise ValueError("the distance field has no surface (no sign change on the grid)")
     all_verts, all_faces = np.concatenate(verts), np.concatenate(faces)
@@ -592,7 +593,6 @@ def build_surface(
     mesh = trimesh.Trimesh(vertices=verts * voxel + lo, faces=faces, process=False)  # welded
     mesh = _repair(mesh)
     return SurfaceResult(mesh=mesh, sections=sections, point_cloud=cloud, voxel_mm=voxel)
-
 
 
 # ------------------------------------------------------------------ the tree
