@@ -422,9 +422,8 @@ def _shell_voxels(
     r_in = np.where(r_in_mm > half_step, np.sqrt(np.maximum(r_in_mm**2 - half_step**2, 0)), -1)
     shell = np.zeros(int(np.prod(shape)), dtype=bool)
     shell[_ball_voxels(base, r_out, shape)] = True
-    has_inner = r_in > 0
-    inner = (np.unique(_ball_voxels(base[has_inner], r_in[has_inner] / voxel, shape))
-             if np.any(has_inner) else np.zeros(0, dtype=np.int64))
+    inner = (np.unique(_ball_voxels(base[r_in > 0], r_in[r_in > 0] / voxel, shape))
+             if np.any(r_in > 0) else np.zeros(0, dtype=np.int64))
     shell[inner] = False
     return np.flatnonzero(shell), inner
 
@@ -469,7 +468,7 @@ def _marching_cubes_on_blocks(
             corners.reshape(-1)[at[k >= 0]] = values[sel][k >= 0]
     verts: list[FloatArray] = []
     faces: list[NDArray[np.int64]] = []
-    n_verts = 0
+    n_verts, on_face = 0, []
     for k, start in enumerate(starts * _MC_BLOCK):
         size = np.minimum(start + _MC_BLOCK, n_cells) + 1 - start  # corners of its cells
         sub = corners[k, :size[0], :size[1], :size[2]]
@@ -479,11 +478,13 @@ def _marching_cubes_on_blocks(
         verts.append(v.astype(np.float64) + start)
         faces.append(f.astype(np.int64) + n_verts)
         n_verts += len(v)
+        on_face.append(np.any((v == 0) | (v == size - 1), axis=1))  # can be shared
     if not verts:
         raise ValueError("the distance field has no surface (no sign change on the grid)")
     all_verts, all_faces = np.concatenate(verts), np.concatenate(faces)
-    # Weld: a vertex shared by 2-4 blocks takes the lowest index of its copies.
-    pairs = cKDTree(all_verts).query_pairs(_WELD_TOL, output_type="ndarray")
+    # Weld: a vertex 2-4 blocks share (on a common face) takes its copies' lowest index.
+    cand = np.flatnonzero(np.concatenate(on_face))
+    pairs = cand[cKDTree(all_verts[cand]).query_pairs(_WELD_TOL, output_type="ndarray")]
     label = np.arange(len(all_verts))
     if len(pairs):
         np.minimum.at(label, pairs[:, 1], pairs[:, 0])
@@ -524,10 +525,9 @@ def _shared_edges(faces: NDArray[np.int64]) -> tuple[NDArray[np.int64], bool, bo
     starts = np.flatnonzero(np.concatenate([[True], sorted_key[1:] != sorted_key[:-1]]))
     counts = np.diff(np.concatenate([starts, [len(key)]]))
     first, second = order[starts[counts == 2]], order[starts[counts == 2] + 1]
-    closed = bool(2 * len(first) == len(edges))
-    consistent = bool(np.all(edges[first, 1] == edges[second, 0]))
     pairs = np.stack([first // 3, second // 3], axis=1)
-    return pairs[pairs[:, 0] != pairs[:, 1]], closed, consistent
+    return (pairs[pairs[:, 0] != pairs[:, 1]], bool(2 * len(first) == len(edges)),
+            bool(np.all(edges[first, 1] == edges[second, 0])))
 
 
 def signed_volume(vertices: FloatArray, faces: NDArray[np.int64]) -> float:
