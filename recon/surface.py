@@ -375,9 +375,14 @@ def _ball_voxels(
     order = np.argsort(norm, kind="stable")
     grid, norm = grid[order], norm[order]
     counts = np.searchsorted(norm, np.maximum(radius_vox, -1.0), side="right")
-    owner = np.repeat(np.arange(len(base)), counts)
     within = np.arange(int(counts.sum())) - np.repeat(np.cumsum(counts) - counts, counts)
-    idx = np.clip(base[owner] + grid[within], 0, np.asarray(shape) - 1)
+    dims = np.asarray(shape)
+    if np.all(base.min(axis=0) >= r_max) and np.all(base.max(axis=0) + r_max < dims):
+        # no ball leaves the grid: flat index of the centre plus the offset's
+        strides = np.array([shape[1] * shape[2], shape[2], 1], dtype=np.int64)
+        return np.repeat(base @ strides, counts) + (grid @ strides)[within]
+    owner = np.repeat(np.arange(len(base)), counts)
+    idx = np.clip(base[owner] + grid[within], 0, dims - 1)
     return np.ravel_multi_index(idx.T, shape)
 
 
@@ -415,58 +420,71 @@ def _shell_voxels(
     r_out = (np.sqrt((big + margin) ** 2 + half_step**2) + slack) / voxel
     r_in_mm = small - margin - slack
     r_in = np.where(r_in_mm > half_step, np.sqrt(np.maximum(r_in_mm**2 - half_step**2, 0)), -1)
-    outer = np.zeros(int(np.prod(shape)), dtype=bool)
-    outer[_ball_voxels(base, r_out, shape)] = True
-    inner = np.zeros_like(outer)
-    has_inner = r_in > 0
-    if np.any(has_inner):
-        inner[_ball_voxels(base[has_inner], r_in[has_inner] / voxel, shape)] = True
-    return np.flatnonzero(outer & ~inner), np.flatnonzero(inner)
+    shell = np.zeros(int(np.prod(shape)), dtype=bool)
+    shell[_ball_voxels(base, r_out, shape)] = True
+    inner = (np.unique(_ball_voxels(base[r_in > 0], r_in[r_in > 0] / voxel, shape))
+             if np.any(r_in > 0) else np.zeros(0, dtype=np.int64))
+    shell[inner] = False
+    return np.flatnonzero(shell), inner
 
 
 def _marching_cubes_on_blocks(
-    grid: NDArray[np.float32], wall: NDArray[np.int64]
+    shape: tuple[int, int, int], band: float, wall: NDArray[np.int64],
+    wall_values: FloatArray, inner: NDArray[np.int64],
 ) -> tuple[FloatArray, NDArray[np.int64]]:
-    """Marching cubes (skimage's Lewiner) of the 0-level of ``grid``, on the blocks the
-    surface crosses only.
-
-    The cells are split into blocks of :data:`_MC_BLOCK`^3; the blocks that have a
-    corner among the ``wall`` voxels (flat indices; every other voxel is a constant
-    +-band, so a sign change needs a wall voxel) and both signs are run one by one,
-    and the vertex that two neighbouring blocks both put on their shared grid edge
-    is welded into one. The result is the mesh of one call over the whole grid:
-    each cell's triangles depend on its 8 corners only.
-
-    Returns (vertices (V, 3) in voxel index units, faces (F, 3)).
-    """
-    n_cells = np.asarray(grid.shape) - 1
+    """Marching cubes (skimage's Lewiner) of the 0-level of a grid of ``shape``: ``wall_values``
+    at the ``wall`` voxels, -``band`` at the ``inner`` ones (flat indices), +``band`` elsewhere
+    and on its outer layer. Never built whole: the blocks of :data:`_MC_BLOCK`^3 cells with a
+    ``wall`` corner get their corners, those with both signs are run one by one, a vertex two
+    blocks share is welded: one call's mesh (vertices (V, 3) in voxels, faces (F, 3))."""
+    n_cells = np.asarray(shape) - 1
     n_blocks = -(-n_cells // _MC_BLOCK)
     occupied = np.zeros(n_blocks, dtype=bool)
-    corner = np.unravel_index(wall, grid.shape)
+    corner = np.unravel_index(wall, shape)
     block_of = [np.minimum(c // _MC_BLOCK, n - 1) for c, n in zip(corner, n_blocks, strict=True)]
     occupied[tuple(block_of)] = True
     # A voxel on a block's lower face is also a corner of the cells of the block below.
     occupied[:-1] |= occupied[1:]
     occupied[:, :-1] |= occupied[:, 1:]
     occupied[:, :, :-1] |= occupied[:, :, 1:]
+    starts = np.argwhere(occupied)
+    slot = np.full(n_blocks, -1, dtype=np.int64)  # each occupied block's index in corners
+    slot[tuple(starts.T)] = np.arange(len(starts))
+    corners = np.full((len(starts),) + (_MC_BLOCK + 1,) * 3, band, dtype=np.float32)
+    side = _MC_BLOCK + 1
+    block_stride = np.array([n_blocks[1] * n_blocks[2], n_blocks[2], 1])
+    corner_stride = np.array([side * side, side, 1])
+    for flat, values in ((inner, np.full(len(inner), -band)), (wall, wall_values)):
+        ijk = np.stack(np.unravel_index(flat, shape), axis=1)
+        keep = np.all((ijk > 0) & (ijk < n_cells), axis=1)  # the outer layer stays +band
+        ijk, values = ijk[keep], np.asarray(values, dtype=np.float32)[keep]
+        block, local = ijk // _MC_BLOCK, ijk % _MC_BLOCK
+        can = (local == 0) & (block > 0)  # on a block's lower face: the block below's too
+        for use_below in np.ndindex(2, 2, 2):
+            below = np.asarray(use_below, dtype=bool)
+            sel = np.flatnonzero(np.all(can | ~below, axis=1))
+            k = slot.reshape(-1)[(block[sel] - below) @ block_stride]
+            at = k * side**3 + np.where(below, _MC_BLOCK, local[sel]) @ corner_stride
+            corners.reshape(-1)[at[k >= 0]] = values[sel][k >= 0]
     verts: list[FloatArray] = []
     faces: list[NDArray[np.int64]] = []
-    n_verts = 0
-    for start in np.argwhere(occupied) * _MC_BLOCK:
-        stop = np.minimum(start + _MC_BLOCK, n_cells) + 1  # corners of the block's cells
-        sub = grid[start[0]:stop[0], start[1]:stop[1], start[2]:stop[2]]
+    n_verts, on_face = 0, []
+    for k, start in enumerate(starts * _MC_BLOCK):
+        size = np.minimum(start + _MC_BLOCK, n_cells) + 1 - start  # corners of its cells
+        sub = corners[k, :size[0], :size[1], :size[2]]
         if not sub.min() < 0.0 < sub.max():
             continue
         v, f, _, _ = marching_cubes(sub, level=0.0)
         verts.append(v.astype(np.float64) + start)
         faces.append(f.astype(np.int64) + n_verts)
         n_verts += len(v)
+        on_face.append(np.any((v == 0) | (v == size - 1), axis=1))  # can be shared
     if not verts:
         raise ValueError("the distance field has no surface (no sign change on the grid)")
-    all_verts = np.concatenate(verts)
-    all_faces = np.concatenate(faces)
-    # Weld: a vertex shared by 2-4 blocks takes the lowest index of its copies.
-    pairs = cKDTree(all_verts).query_pairs(_WELD_TOL, output_type="ndarray")
+    all_verts, all_faces = np.concatenate(verts), np.concatenate(faces)
+    # Weld: a vertex 2-4 blocks share (on a common face) takes its copies' lowest index.
+    cand = np.flatnonzero(np.concatenate(on_face))
+    pairs = cand[cKDTree(all_verts[cand]).query_pairs(_WELD_TOL, output_type="ndarray")]
     label = np.arange(len(all_verts))
     if len(pairs):
         np.minimum.at(label, pairs[:, 1], pairs[:, 0])
@@ -479,18 +497,37 @@ def _repair(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
     """Largest component, no degenerate faces, outward winding."""
     mesh.update_faces(mesh.nondegenerate_faces())
     mesh.remove_unreferenced_vertices()
-    labels = trimesh.graph.connected_component_labels(mesh.face_adjacency, len(mesh.faces))
+    adjacency, closed, consistent = _shared_edges(mesh.faces)
+    labels = trimesh.graph.connected_component_labels(adjacency, len(mesh.faces))
     if labels.size and labels.max() > 0:
         keep = labels == np.bincount(labels).argmax()
         mesh.update_faces(keep)
         mesh.remove_unreferenced_vertices()
-    if not mesh.is_watertight:
+        _, closed, consistent = _shared_edges(mesh.faces)
+    if not closed:
         trimesh.repair.fill_holes(mesh)
-    if not mesh.is_winding_consistent:
+    if not (closed and consistent) and not mesh.is_winding_consistent:
         trimesh.repair.fix_winding(mesh)
     if signed_volume(mesh.vertices, mesh.faces) < 0:
         mesh.invert()
     return mesh
+
+
+def _shared_edges(faces: NDArray[np.int64]) -> tuple[NDArray[np.int64], bool, bool]:
+    """Pairs (P, 2) of faces (F, 3) sharing an edge that exactly two faces use; closed (all
+    edges so); consistently wound (each such edge run both ways): trimesh's ``face_adjacency``,
+    ``is_watertight``, ``is_winding_consistent`` from one sort of edge keys, not hashed rows."""
+    edges = faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2).astype(np.int64)  # face f: rows 3f..
+    lo, hi = np.minimum(edges[:, 0], edges[:, 1]), np.maximum(edges[:, 0], edges[:, 1])
+    key = lo * (int(faces.max()) + 1 if faces.size else 1) + hi
+    order = np.argsort(key, kind="stable")
+    sorted_key = key[order]
+    starts = np.flatnonzero(np.concatenate([[True], sorted_key[1:] != sorted_key[:-1]]))
+    counts = np.diff(np.concatenate([starts, [len(key)]]))
+    first, second = order[starts[counts == 2]], order[starts[counts == 2] + 1]
+    pairs = np.stack([first // 3, second // 3], axis=1)
+    return (pairs[pairs[:, 0] != pairs[:, 1]], bool(2 * len(first) == len(edges)),
+            bool(np.all(edges[first, 1] == edges[second, 0])))
 
 
 def signed_volume(vertices: FloatArray, faces: NDArray[np.int64]) -> float:
@@ -545,27 +582,17 @@ def build_surface(
 
     band = 2.0 * voxel  # exact distances within this of the wall; the rest is only a sign
     shell, inner = _shell_voxels(sections, shape, lo, voxel, band)
-    grid = np.full(int(np.prod(shape)), band, dtype=np.float32)
-    grid[inner] = -band
+    wall_values = np.empty(len(shell), dtype=np.float32)
     tree = cKDTree(sections.centers)
     for start in range(0, len(shell), _CHUNK):
-        chunk = shell[start : start + _CHUNK]
-        ijk = np.stack(np.unravel_index(chunk, shape), axis=1)
-        grid[chunk] = _tube_sdf(lo + ijk * voxel, sections, tree)
-    # Nudge exact zeros off the level (only the shell holds values other than +-band).
-    tiny = np.float32(1e-4 * voxel)
-    grid[shell[np.abs(grid[shell]) < tiny]] = tiny
-    grid = grid.reshape(shape)
-    # Keep the outer layer outside so the surface closes.
-    grid[[0, -1], :, :] = band
-    grid[:, [0, -1], :] = band
-    grid[:, :, [0, -1]] = band
-
-    verts, faces = _marching_cubes_on_blocks(grid, shell)
-    mesh = trimesh.Trimesh(vertices=verts * voxel + lo, faces=faces, process=True)
+        ijk = np.stack(np.unravel_index(shell[start : start + _CHUNK], shape), axis=1)
+        wall_values[start : start + _CHUNK] = _tube_sdf(lo + ijk * voxel, sections, tree)
+    tiny = np.float32(1e-4 * voxel)  # exact zeros nudged off the level
+    wall_values[np.abs(wall_values) < tiny] = tiny
+    verts, faces = _marching_cubes_on_blocks(shape, band, shell, wall_values, inner)
+    mesh = trimesh.Trimesh(vertices=verts * voxel + lo, faces=faces, process=False)  # welded
     mesh = _repair(mesh)
     return SurfaceResult(mesh=mesh, sections=sections, point_cloud=cloud, voxel_mm=voxel)
-
 
 
 # ------------------------------------------------------------------ the tree

@@ -75,6 +75,8 @@ _BG_SCALE = 1.4
 #: A scale is computed on the coarsest pyramid level where it is still this many
 #: level pixels.
 _LEVEL_SIGMA_PX = 1.5
+#: Rows per strip of the per-scale terms (their temporaries then fit in a core's cache).
+_STRIP_ROWS = 32
 
 
 @dataclass(frozen=True, eq=False)
@@ -220,29 +222,58 @@ def _fill_outside(image: F32, field: NDArray[np.bool_]) -> F32:
 
 
 # ---------------------------------------------------------- one scale's terms
-def _ridge_terms(level: F32, sigma_level_px: float, residual_px: float) -> tuple[F32, ...]:
-    """Per-pixel ridge terms of one scale on one pyramid level (all (h, w) float32).
-
-    Returns the blob term, the edge term, the dark-blob ratio clip(l1 / l2, 0, 1)
-    (1 at the centre of a crossing or a junction), S (sigma^2-normalised Hessian
-    norm) and the vessel direction's cos 2theta, sin 2theta (theta = angle of the
-    (col, row) tangent).
-    """
+def _padded_smooth(level: F32, residual_px: float) -> F32:
+    """The level (h, w) blurred by ``residual_px`` and edge-padded by one pixel (h + 2, w + 2)."""
     smooth = cv2.GaussianBlur(level, (0, 0), residual_px, borderType=cv2.BORDER_REFLECT)
-    p = np.pad(smooth, 1, mode="edge")
-    c, n_, s_, w_, e_ = p[1:-1, 1:-1], p[:-2, 1:-1], p[2:, 1:-1], p[1:-1, :-2], p[1:-1, 2:]
+    return np.pad(smooth, 1, mode="edge")
+
+
+def _derivatives(p: F32, sigma_level_px: float, step: int = 1) -> tuple[F32, ...]:
+    """Scale-normalised hxx, hyy, hxy (d2/dcol2, d2/drow2, d2/dcol drow) and gx, gy by
+    central differences at every ``step``-th row and column of the padded ``p``'s inner
+    pixels (all (h, w) float32 for ``step`` 1)."""
+    i, o = slice(1, -1, step), slice(0, -2, step)  # the pixel, the one before
+    n = slice(2, None, step)  # the one after
+    c, n_, s_, w_, e_ = p[i, i], p[o, i], p[n, i], p[i, o], p[i, n]
     s2 = np.float32(sigma_level_px**2)
-    hxx = (e_ - 2.0 * c + w_) * s2  # d2/dcol2
-    hyy = (s_ - 2.0 * c + n_) * s2  # d2/drow2
-    hxy = 0.25 * (p[2:, 2:] - p[2:, :-2] - p[:-2, 2:] + p[:-2, :-2]) * s2
+    hxx = (e_ - 2.0 * c + w_) * s2
+    hyy = (s_ - 2.0 * c + n_) * s2
+    hxy = 0.25 * (p[n, n] - p[n, o] - p[o, n] + p[o, o]) * s2
     gx = 0.5 * (e_ - w_) * np.float32(sigma_level_px)
     gy = 0.5 * (s_ - n_) * np.float32(sigma_level_px)
+    return hxx, hyy, hxy, gx, gy
+
+
+def _eigen(hxx: F32, hyy: F32, hxy: F32) -> tuple[F32, F32, F32, F32]:
+    """(dxy, disc, l1, l2) of the Hessians: |l1| <= |l2|, dxy = (hxx - hyy) / 2 and
+    disc = half the eigenvalues' difference."""
     half_tr = 0.5 * (hxx + hyy)
     dxy = 0.5 * (hxx - hyy)
     disc = np.sqrt(dxy * dxy + hxy * hxy)
     e_hi, e_lo = half_tr + disc, half_tr - disc  # algebraic: e_hi >= e_lo
     l2 = np.where(np.abs(e_hi) >= np.abs(e_lo), e_hi, e_lo)
     l1 = 2.0 * half_tr - l2
+    return dxy, disc, l1, l2
+
+
+def _s_norm_sub(p: F32, sigma_level_px: float) -> F32:
+    """S (sigma^2-normalised Hessian norm) at every other row and column of the level."""
+    hxx, hyy, hxy, _, _ = _derivatives(p, sigma_level_px, step=2)
+    _, _, l1, l2 = _eigen(hxx, hyy, hxy)
+    return np.sqrt(l1 * l1 + l2 * l2)
+
+
+def _ridge_terms(p: F32, sigma_level_px: float) -> tuple[F32, ...]:
+    """Per-pixel ridge terms of one scale on rows of one pyramid level, from the padded
+    smoothed level ``p`` (:func:`_padded_smooth`; all (h, w) float32, h = rows of ``p`` - 2).
+
+    Returns the blob term, the edge term, the dark-blob ratio clip(l1 / l2, 0, 1)
+    (1 at the centre of a crossing or a junction), S (sigma^2-normalised Hessian
+    norm) and the vessel direction's cos 2theta, sin 2theta (theta = angle of the
+    (col, row) tangent).
+    """
+    hxx, hyy, hxy, gx, gy = _derivatives(p, sigma_level_px)
+    dxy, disc, l1, l2 = _eigen(hxx, hyy, hxy)
     # Across-vessel direction = eigenvector of e_hi (the dark ridge's l2 > 0).
     r = np.maximum(disc, np.float32(1e-20))
     cos2a, sin2a = dxy / r, hxy / r  # angle 2*alpha of the across direction
@@ -262,6 +293,41 @@ def _ridge_terms(level: F32, sigma_level_px: float, residual_px: float) -> tuple
     return (blob.astype(f32, copy=False), edge.astype(f32, copy=False),
             dark_blob.astype(f32, copy=False), s_norm.astype(f32, copy=False),
             (-cos2a).astype(f32, copy=False), (-sin2a).astype(f32, copy=False))
+
+
+def _best_over_scales(shape: tuple[int, int], scales: list[tuple[F32, float, float, float]],
+                      up: list[F32] | None) -> list[F32]:
+    """One level's layers (best, log sigma, ridge, ratio, cos2, sin2, blob, S, then the
+    junction measure; each (h, w)): per pixel the strongest of the level's scales
+    (``scales``: padded smoothed level, sigma in level px, sigma px, c) and of the
+    coarser levels' layers ``up`` (already at this level's size), ties to the first.
+
+    Computed in strips of :data:`_STRIP_ROWS` rows, the same arithmetic per pixel: a
+    strip's temporaries stay in the processor's cache where a dozen whole-image
+    temporaries per scale would stream through memory.
+    """
+    out = [np.empty(shape, np.float32) for _ in range(9)]
+    for r0 in range(0, shape[0], _STRIP_ROWS):
+        r1 = min(r0 + _STRIP_ROWS, shape[0])
+        cur: list[F32] | None = None
+        cur_jb: F32 | None = None
+        for p, s_lv, s, c in scales:
+            blob, edge, dark_blob, s_norm, c2t, s2t = _ridge_terms(p[r0:r1 + 2], s_lv)
+            strength = blob * edge * s_norm
+            struct = 1.0 - np.exp(-np.minimum(s_norm * np.float32(1.0 / c), 1e3) ** 2 / 2.0)
+            layer = [strength, np.full_like(strength, np.log(s)), blob * struct,
+                     strength * np.float32(1.0 / c), c2t, s2t, blob, s_norm]
+            cur = layer if cur is None else _keep_stronger(cur, layer)
+            jb = (dark_blob * struct).astype(np.float32)
+            cur_jb = jb if cur_jb is None else np.maximum(cur_jb, jb)
+        if up is not None:
+            u = [a[r0:r1] for a in up]
+            cur = u[:8] if cur is None else _keep_stronger(cur, u[:8])
+            cur_jb = u[8] if cur_jb is None else np.maximum(cur_jb, u[8])
+        assert cur is not None and cur_jb is not None
+        for dst, src in zip(out, [*cur, cur_jb], strict=True):
+            dst[r0:r1] = src
+    return out
 
 
 def _upsample2(arr: F32, shape: tuple[int, int]) -> F32:
@@ -330,36 +396,24 @@ def compute_vesselness(
     inside = img[::4, ::4][valid[::4, ::4]] if np.any(valid[::4, ::4]) else img.ravel()
     p_lo, p_hi = np.percentile(inside, [0.5, 99.5]) if inside.size else (0.0, 1.0)
     c_floor = max(1e-4 * float(p_hi - p_lo), 1e-20)
-    merged: list[F32] | None = None  # best, log sigma, response, ratio, cos2, sin2
-    merged_jb: F32 | None = None  # junction / crossing measure, max over scales
+    merged: list[F32] | None = None  # best, log sigma, ridge, ratio, cos2, sin2, blob, S, jb
     for lv in range(n_lv - 1, -1, -1):
         lvl = levels[lv]
-        field_lv = valid[:: 1 << lv, :: 1 << lv][: lvl.shape[0], : lvl.shape[1]]
-        cur: list[F32] | None = None
-        cur_jb: F32 | None = None
+        field_sub = valid[:: 2 << lv, :: 2 << lv][: (lvl.shape[0] + 1) // 2,
+                                                 : (lvl.shape[1] + 1) // 2]
+        scales = []
         for s in sigmas[[i for i, v in enumerate(level_of) if v == lv]]:
             s_lv = float(s) / (1 << lv)
             residual = float(np.sqrt(max(s_lv**2 - acc_blur[lv] ** 2, 0.09)))
-            blob, edge, dark_blob, s_norm, c2t, s2t = _ridge_terms(lvl, s_lv, residual)
-            shape_t = blob * edge
-            ref = s_norm[::2, ::2][field_lv[::2, ::2]]
+            p = _padded_smooth(lvl, residual)
+            ref = _s_norm_sub(p, s_lv)[field_sub]
             c = max(_KAPPA * _BG_SCALE * float(np.percentile(ref, _BG_PERCENTILE))
                     if ref.size else 0.0, c_floor)
-            strength = shape_t * s_norm
-            struct = 1.0 - np.exp(-np.minimum(s_norm * np.float32(1.0 / c), 1e3) ** 2 / 2.0)
-            layer = [strength, np.full_like(strength, np.log(s)), blob * struct,
-                     strength * np.float32(1.0 / c), c2t, s2t, blob, s_norm]
-            cur = layer if cur is None else _keep_stronger(cur, layer)
-            jb = (dark_blob * struct).astype(np.float32)
-            cur_jb = jb if cur_jb is None else np.maximum(cur_jb, jb)
-        if merged is not None:
-            up = [_upsample2(a, lvl.shape) for a in merged]
-            cur = up if cur is None else _keep_stronger(cur, up)
-            up_jb = _upsample2(merged_jb, lvl.shape)
-            cur_jb = up_jb if cur_jb is None else np.maximum(cur_jb, up_jb)
-        merged, merged_jb = cur, cur_jb
+            scales.append((p, s_lv, float(s), c))
+        up = None if merged is None else [_upsample2(a, lvl.shape) for a in merged]
+        merged = _best_over_scales(lvl.shape, scales, up)
     assert merged is not None
-    _, log_s, ridge, snr, cos2, sin2, blob, s_norm = merged
+    _, log_s, ridge, snr, cos2, sin2, blob, s_norm, merged_jb = merged
     scale = np.exp(log_s).astype(np.float32)
     # The display response: Frangi's structure constant from the image's strongest
     # Hessian norm (half of it), normalised by the 99.9th percentile (as before the

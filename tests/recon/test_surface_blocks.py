@@ -31,6 +31,13 @@ def _bent_tube_field(shape: tuple[int, int, int], band: float,
     return grid, wall
 
 
+def _blocks(grid: np.ndarray, wall: np.ndarray, band: float) -> tuple[np.ndarray, np.ndarray]:
+    """surface._marching_cubes_on_blocks given the grid's wall values and its inside voxels."""
+    flat = grid.ravel()
+    return surface._marching_cubes_on_blocks(grid.shape, band, wall, flat[wall],
+                                             np.flatnonzero(flat == -band))
+
+
 def _triangles(faces: np.ndarray) -> set[tuple[int, int, int]]:
     """Each face rotated to start at its smallest vertex index (so that the winding counts)."""
     start = np.argmin(faces, axis=1)
@@ -45,7 +52,7 @@ def test_block_marching_cubes_equals_one_call_over_the_grid(
 ) -> None:
     grid, wall = _bent_tube_field((30, 34, 17), band=2.0, wall_halfwidth=wall_halfwidth)
     monkeypatch.setattr(surface, "_MC_BLOCK", block)
-    verts, faces = surface._marching_cubes_on_blocks(grid, wall)
+    verts, faces = _blocks(grid, wall, band=2.0)
     ref_verts, ref_faces, _, _ = marching_cubes(grid, level=0.0)
 
     assert len(verts) == len(ref_verts) and len(faces) == len(ref_faces)
@@ -64,7 +71,7 @@ def test_block_marching_cubes_equals_one_call_over_the_grid(
 def test_block_marching_cubes_without_a_surface_is_refused() -> None:
     grid = np.full((10, 10, 10), 2.0, dtype=np.float32)
     with pytest.raises(ValueError, match="no surface"):
-        surface._marching_cubes_on_blocks(grid, np.arange(10))
+        _blocks(grid, np.arange(10), band=2.0)
 
 
 def test_signed_volume_agrees_with_trimesh_and_tells_the_winding():
@@ -77,3 +84,27 @@ def test_signed_volume_agrees_with_trimesh_and_tells_the_winding():
     assert signed_volume(sphere.vertices, sphere.faces) == pytest.approx(sphere.volume, rel=1e-12)
     assert signed_volume(sphere.vertices, sphere.faces[:, ::-1]) == pytest.approx(-sphere.volume,
                                                                                   rel=1e-12)
+
+
+def _as_set(pairs: np.ndarray) -> set[tuple[int, int]]:
+    return {tuple(int(i) for i in row) for row in np.sort(pairs, axis=1)}
+
+
+@pytest.mark.parametrize("case", ["tube", "open", "flipped", "two pieces"])
+def test_shared_edges_agree_with_trimesh(case: str) -> None:
+    grid, wall = _bent_tube_field((30, 34, 17), band=2.0, wall_halfwidth=2.0)
+    tube = trimesh.Trimesh(*_blocks(grid, wall, band=2.0), process=False)
+    box = trimesh.creation.box()
+    flipped = box.faces.copy()
+    flipped[3] = flipped[3][::-1]
+    mesh = {"tube": tube,
+            "open": trimesh.Trimesh(box.vertices, box.faces[:-1], process=False),
+            "flipped": trimesh.Trimesh(box.vertices, flipped, process=False),
+            "two pieces": trimesh.util.concatenate(
+                [box, box.copy().apply_translation([5.0, 0.0, 0.0])])}[case]
+    pairs, closed, consistent = surface._shared_edges(np.asarray(mesh.faces))
+    assert _as_set(pairs) == _as_set(mesh.face_adjacency)
+    assert closed == mesh.is_watertight
+    assert consistent == mesh.is_winding_consistent
+    assert (closed, consistent) == {"tube": (True, True), "open": (False, True),
+                                    "flipped": (True, False), "two pieces": (True, True)}[case]
