@@ -1,4 +1,4 @@
-"""centerline.vtp: the 3D centerline as VTK XML polydata.
+"""centerline.vtp: the 3D centerline as VTK XML polydata (the vtk library).
 
 One polyline cell per branch through its points, proximal to distal, in
 view A's world frame (DICOM LPS, mm), the same points as centerline.csv.
@@ -8,19 +8,16 @@ elliptic section, centerline.csv's ``radius_mm``; the name VMTK and
 proximal end, centerline.csv's ``s_mm``; VMTK's name for it) and
 ``BranchId`` (integer, centerline.csv's ``branch``: the segment's index in
 seeds.json).
-
-The file is written here as text (VTK's XML format for polydata, "VTK File
-Formats", VTK User's Guide, Kitware: a ``Piece`` with its ``PointData``,
-``Points`` and ``Lines`` (``connectivity`` and ``offsets``), ASCII data arrays)
-rather than through the vtk library, whose import costs more than the whole
-writing (the cold ``coronary3d reconstruct`` pays it); the values are written
-with 17 significant digits, so they read back exactly.
 """
 
 from __future__ import annotations
 
 import numpy as np
 from numpy.typing import ArrayLike
+from vtkmodules.util.numpy_support import numpy_to_vtk
+from vtkmodules.vtkCommonCore import vtkPoints
+from vtkmodules.vtkCommonDataModel import vtkCellArray, vtkPolyData, vtkPolyLine
+from vtkmodules.vtkIOXML import vtkXMLPolyDataWriter
 
 __all__ = ["RADIUS_ARRAY", "ABSCISSA_ARRAY", "BRANCH_ARRAY", "centerline_polydata_bytes"]
 
@@ -57,35 +54,27 @@ def centerline_polydata_bytes(
     stops = np.concatenate([starts[1:], [n]])
     if np.any(stops - starts < 2):
         raise ValueError("every branch of the centerline needs at least two points")
-    arrays = "".join(_data_array(values, name=name)
-                     for name, values in ((RADIUS_ARRAY, radius), (ABSCISSA_ARRAY, s),
-                                          (BRANCH_ARRAY, ids)))
-    text = (
-        '<?xml version="1.0"?>\n'
-        '<VTKFile type="PolyData" version="1.0" byte_order="LittleEndian" '
-        'header_type="UInt64">\n'
-        "  <PolyData>\n"
-        f'    <Piece NumberOfPoints="{n}" NumberOfVerts="0" NumberOfLines="{len(starts)}" '
-        'NumberOfStrips="0" NumberOfPolys="0">\n'
-        f'      <PointData Scalars="{RADIUS_ARRAY}">\n{arrays}      </PointData>\n'
-        f"      <Points>\n{_data_array(points_mm)}      </Points>\n"
-        "      <Lines>\n"
-        f'{_data_array(np.arange(n, dtype=np.int64), name="connectivity")}'
-        f'{_data_array(stops.astype(np.int64), name="offsets")}'
-        "      </Lines>\n"
-        "    </Piece>\n"
-        "  </PolyData>\n"
-        "</VTKFile>\n"
-    )
-    return text.encode("ascii")
-
-
-def _data_array(values: np.ndarray, name: str | None = None) -> str:
-    """One ``DataArray`` element (ASCII) of (N,) or (N, C) float64 or integer values."""
-    kind = {np.dtype(np.float64): ("Float64", "%.17g"), np.dtype(np.int32): ("Int32", "%d"),
-            np.dtype(np.int64): ("Int64", "%d")}[values.dtype]
-    components = 1 if values.ndim == 1 else values.shape[1]
-    named = "" if name is None else f' Name="{name}"'
-    body = " ".join(kind[1] % v for v in values.ravel().tolist())
-    return (f'        <DataArray type="{kind[0]}"{named} NumberOfComponents="{components}" '
-            f'format="ascii">\n          {body}\n        </DataArray>\n')
+    points = vtkPoints()
+    points.SetData(numpy_to_vtk(points_mm, deep=True))
+    cells = vtkCellArray()
+    for start, stop in zip(starts, stops, strict=True):
+        line = vtkPolyLine()
+        line.GetPointIds().SetNumberOfIds(int(stop - start))
+        for k, i in enumerate(range(int(start), int(stop))):
+            line.GetPointIds().SetId(k, i)
+        cells.InsertNextCell(line)
+    poly = vtkPolyData()
+    poly.SetPoints(points)
+    poly.SetLines(cells)
+    for name, values in ((RADIUS_ARRAY, radius), (ABSCISSA_ARRAY, s), (BRANCH_ARRAY, ids)):
+        array = numpy_to_vtk(values, deep=True)
+        array.SetName(name)
+        poly.GetPointData().AddArray(array)
+    poly.GetPointData().SetActiveScalars(RADIUS_ARRAY)
+    writer = vtkXMLPolyDataWriter()
+    writer.SetInputData(poly)
+    writer.SetDataModeToBinary()  # base64 inline, zlib-compressed: the file is ASCII
+    writer.WriteToOutputStringOn()
+    if not writer.Write():
+        raise ValueError("vtk could not serialise the centerline polydata")
+    return writer.GetOutputString().encode("ascii")

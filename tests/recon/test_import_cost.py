@@ -53,17 +53,3 @@ def test_the_package_still_re_exports_its_api_on_first_use() -> None:
     assert recon.ViewGeometry is ViewGeometry
     for name in recon.__all__:
         assert getattr(recon, name) is not None, name
-
-
-def test_writing_the_outputs_of_a_job_imports_no_vtk() -> None:
-    code = "\n".join([
-        "import sys, numpy as np",
-        "from recon.io.vtp import centerline_polydata_bytes",
-        "X = np.column_stack([np.arange(4.0), np.zeros(4), np.zeros(4)])",
-        "text = centerline_polydata_bytes(X, np.ones(4), np.arange(4.0)).decode()",
-        "assert '<Lines>' in text and 'Name=\"Radius\"' in text",
-        "heavy = [m for m in sys.modules if m.startswith(('vtk', 'vtkmodules'))]",
-        "assert not heavy, heavy",
-    ])
-    result = _run(code)
-    assert result.returncode == 0, result.stderr
