@@ -521,6 +521,7 @@ def trace_segment(
     idx = np.arange(len(points))
     radius = np.interp(idx, idx[ok2], radius[ok2])
     radius = _hold_ends(_smooth_radius(radius, spacing_px), spacing_px)
+    depth = _smooth_radius(np.interp(idx, idx[ok2], fit2.depth[ok2]), spacing_px)
     brightness = ndi.map_coordinates(img, [points[:, 1], points[:, 0]], order=1, mode="nearest")
 
     # The snapped clicks, moved onto the trace.
@@ -541,6 +542,7 @@ def trace_segment(
         intensity_reason=reason,
         intensity_power=float(power),
         blur_px=float(blur),
+        depth=depth,
     )
 
 
