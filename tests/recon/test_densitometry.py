@@ -126,3 +126,25 @@ def test_calibration_needs_round_points_and_ignores_outliers():
     few = np.zeros(len(s), dtype=bool)
     few[:10] = True
     assert calibrate_attenuation(s, rho, few) is None
+
+
+def test_fill_draws_span_the_two_views_disagreement():
+    """Round fills exactly 1 (no calibration scatter): the draws are the common factor
+    1 +- |A_a - A_b| / (A_a + A_b), the same for both views, reaching both ends."""
+    from recon.densitometry import fill_draws
+
+    cl = centerline_3d(straight(), 1.0)
+    m = len(cl.X_world)
+    lesion = np.arange(m) == m // 2
+    r_b = np.where(lesion, 0.5, 1.0)
+    fill_a = np.where(lesion, 0.36, 1.0)  # A_a = 0.36 pi, A_b = 0.25 * 1.2 pi = 0.30 pi
+    fill_b = np.where(lesion, 1.2, 1.0)
+    cl = replace(cl, radius_b_mm=r_b, fill_a=fill_a, fill_b=fill_b)
+    draws = fill_draws(cl, 4000, np.random.default_rng(0))
+    assert draws.shape == (4000, 2, m)
+    np.testing.assert_allclose(draws[:, :, ~lesion], 1.0)
+    gap = 0.06 / 0.66
+    at = draws[:, 0, m // 2]
+    np.testing.assert_allclose(draws[:, 0, m // 2], draws[:, 1, m // 2])
+    assert at.min() >= 1 - gap - 1e-12 and at.max() <= 1 + gap + 1e-12
+    assert at.min() < 1 - 0.95 * gap and at.max() > 1 + 0.95 * gap
