@@ -521,12 +521,8 @@ def trace_segment(
     idx = np.arange(len(points))
     radius = np.interp(idx, idx[ok2], radius[ok2])
     radius = _hold_ends(_smooth_radius(radius, spacing_px), spacing_px)
-    # The densitometric signal: the fitted profile's integral b r^2 is what the data fix
-    # (b and r trade off in a narrow, blurred profile), smoothed like the radius and
-    # returned as the depth that goes with the smoothed radius.
-    integral = fit2.depth * np.nan_to_num(fit2.radius_px, nan=0.0) ** 2
-    integral = _smooth_radius(np.interp(idx, idx[ok2], integral[ok2]), spacing_px)
-    depth = integral / np.maximum(radius, 1e-6) ** 2
+    # the densitometric signal (recon.densitometry), smoothed like the radius
+    depth = _smooth_radius(np.interp(idx, idx[ok2], fit2.depth[ok2]), spacing_px)
     brightness = ndi.map_coordinates(img, [points[:, 1], points[:, 0]], order=1, mode="nearest")
 
     # The snapped clicks, moved onto the trace.
