@@ -251,10 +251,14 @@ def elliptic_cross_sections(
         area, w_agree = densitometric_area(r_a, r_b, np.asarray(cl3d.fill_a),
                                            np.asarray(cl3d.fill_b))
         w_dens *= w_agree
-        major_dir, major_mm, minor_mm = blend_sections(
-            T, l_a, l_b, r_a, r_b, major_dir, major_mm, minor_mm, area, w_dens)
-        major_dir = _consistent_signs(major_dir)
-        minor_dir, _ = _unit(np.cross(T, major_dir))
+        k = np.flatnonzero(w_dens > 0)
+        if k.size:
+            major_dir, major_mm, minor_mm = major_dir.copy(), major_mm.copy(), minor_mm.copy()
+            major_dir[k], major_mm[k], minor_mm[k] = blend_sections(
+                T[k], l_a[k], l_b[k], r_a[k], r_b[k], major_dir[k], major_mm[k],
+                minor_mm[k], area[k], w_dens[k])
+            major_dir = _consistent_signs(major_dir)
+            minor_dir, _ = _unit(np.cross(T, major_dir))
 
     return CrossSections(
         centers=X,
