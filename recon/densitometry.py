@@ -51,6 +51,7 @@ __all__ = [
     "densitometric_area",
     "blend_sections",
     "fill_draws",
+    "densitometric_sections",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -286,3 +287,31 @@ def fill_draws(cl3d: Centerline3D, n_samples: int, rng: np.random.Generator) -> 
     shift = rng.standard_normal((n_samples, 2, 1)) * np.array(sds)[None, :, None]
     spread = 1.0 + rng.uniform(-1.0, 1.0, (n_samples, 1, 1)) * gap[None, None, :]
     return np.exp(shift) * np.broadcast_to(spread, (n_samples, 2, m))
+
+
+def densitometric_sections(
+    cl3d: Centerline3D, T: FloatArray, l_a: FloatArray, l_b: FloatArray, r_a: FloatArray,
+    r_b: FloatArray, major_dir: FloatArray, major_mm: FloatArray, minor_mm: FloatArray,
+    line_weight: FloatArray,
+) -> tuple[FloatArray, FloatArray, FloatArray] | None:
+    """The two-caliper sections (major axis (M, 3), semi-axes (M,), (M,)) with the
+    densitometric ellipse blended in (:func:`blend_sections`) where the calipers
+    disagree (:func:`densitometric_weight`), the two views' areas agree
+    (:func:`densitometric_area`), neither view's radius was replaced (an overlap)
+    and the two lines are far enough from parallel (``line_weight`` (M,), the
+    two-caliper builder's own); None when ``cl3d`` has no fill ratios or no point
+    qualifies."""
+    if cl3d.fill_a is None or cl3d.fill_b is None:
+        return None
+    w = densitometric_weight(r_a, r_b) * line_weight
+    w *= ~(np.asarray(cl3d.overlap_a) | np.asarray(cl3d.overlap_b))
+    area, w_agree = densitometric_area(r_a, r_b, np.asarray(cl3d.fill_a),
+                                       np.asarray(cl3d.fill_b))
+    k = np.flatnonzero(w * w_agree > 0)
+    if not k.size:
+        return None
+    major_dir, major_mm, minor_mm = major_dir.copy(), major_mm.copy(), minor_mm.copy()
+    major_dir[k], major_mm[k], minor_mm[k] = blend_sections(
+        T[k], l_a[k], l_b[k], r_a[k], r_b[k], major_dir[k], major_mm[k], minor_mm[k],
+        area[k], (w * w_agree)[k])
+    return major_dir, major_mm, minor_mm

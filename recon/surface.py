@@ -27,7 +27,7 @@ from scipy.ndimage import maximum_filter1d, minimum_filter1d
 from scipy.spatial import cKDTree
 from skimage.measure import marching_cubes
 
-from recon.densitometry import blend_sections, densitometric_area, densitometric_weight
+from recon.densitometry import densitometric_sections
 from recon.geometry import ViewGeometry
 from recon.types import Centerline3D, arclength
 
@@ -245,20 +245,12 @@ def elliptic_cross_sections(
     weight = np.where(denom > 1e-9, weight, 0.0)
     minor_mm = weight * b_solved + (1.0 - weight) * short_mm
 
-    if cl3d.fill_a is not None and cl3d.fill_b is not None:  # the densitometric area
-        w_dens = densitometric_weight(r_a, r_b) * weight
-        w_dens *= ~(np.asarray(cl3d.overlap_a) | np.asarray(cl3d.overlap_b))
-        area, w_agree = densitometric_area(r_a, r_b, np.asarray(cl3d.fill_a),
-                                           np.asarray(cl3d.fill_b))
-        w_dens *= w_agree
-        k = np.flatnonzero(w_dens > 0)
-        if k.size:
-            major_dir, major_mm, minor_mm = major_dir.copy(), major_mm.copy(), minor_mm.copy()
-            major_dir[k], major_mm[k], minor_mm[k] = blend_sections(
-                T[k], l_a[k], l_b[k], r_a[k], r_b[k], major_dir[k], major_mm[k],
-                minor_mm[k], area[k], w_dens[k])
-            major_dir = _consistent_signs(major_dir)
-            minor_dir, _ = _unit(np.cross(T, major_dir))
+    blended = densitometric_sections(cl3d, T, l_a, l_b, r_a, r_b, major_dir, major_mm,
+                                     minor_mm, weight)
+    if blended is not None:  # the densitometric area where the calipers disagree
+        major_dir, major_mm, minor_mm = blended
+        major_dir = _consistent_signs(major_dir)
+        minor_dir, _ = _unit(np.cross(T, major_dir))
 
     return CrossSections(
         centers=X,
