@@ -34,7 +34,7 @@ EuroIntervention, for the phantom validation of such a tool):
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -132,18 +132,7 @@ class Junction:
         X_new = X + w[:, None] * (J - X[0])[None, :]
         T = np.gradient(X_new, axis=0)
         T /= np.maximum(np.linalg.norm(T, axis=1, keepdims=True), 1e-12)
-        return Centerline3D(
-            X_world=X_new,
-            s_mm=arclength(X_new),
-            tangents=T,
-            radius_a_mm=cl3d.radius_a_mm,
-            radius_b_mm=cl3d.radius_b_mm,
-            X_raw_world=cl3d.X_raw_world,
-            points_a_px=cl3d.points_a_px,
-            points_b_px=cl3d.points_b_px,
-            overlap_a=cl3d.overlap_a,
-            overlap_b=cl3d.overlap_b,
-        )
+        return replace(cl3d, X_world=X_new, s_mm=arclength(X_new), tangents=T)
 
 
 def direction_away(X_world: FloatArray, s_mm: FloatArray, s_from: float, s_to: float) -> FloatArray:

@@ -560,6 +560,8 @@ def trace_segment(
     use = ok2 & ~crowded if np.count_nonzero(ok2 & ~crowded) >= 2 else ok2
     radius = np.interp(idx, idx[use], radius[use])
     radius = _hold_ends(_smooth_radius(radius, spacing_px), spacing_px)
+    # the densitometric signal (recon.densitometry), smoothed like the radius
+    depth = _smooth_radius(np.interp(idx, idx[ok2], fit2.depth[ok2]), spacing_px)
     brightness = ndi.map_coordinates(img, [points[:, 1], points[:, 0]], order=1, mode="nearest")
 
     # The snapped clicks, moved onto the trace.
@@ -580,6 +582,7 @@ def trace_segment(
         intensity_reason=reason,
         intensity_power=float(power),
         blur_px=float(blur),
+        depth=depth,
     )
 
 

@@ -5,7 +5,8 @@ the command line (`coronary3d reconstruct`) and the viewer both call it.
 
     trace both views -> calibrate view B on the clicked features (PALM, eq. 5)
     -> match (CBOCD + DP, eqs. 6-10)
-    -> triangulate + smooth (eqs. 2-3) -> elliptic sections + surface
+    -> triangulate + smooth (eqs. 2-3) -> densitometric area (recon.densitometry)
+    -> elliptic sections + surface
        (sec. 3.5, eq. 11) -> 3D measurements -> foreshortening and the best next view
 
 Self-calibration (off by default, ``ReconstructionOptions.self_calibration``)
@@ -36,6 +37,7 @@ from recon.calibration import (
 from recon.calibration_curves import calibrate_with_curves
 from recon.centerline import VesselnessMap, compute_vesselness, trace_segment
 from recon.consistency import ConsistencyResult, check_consistency
+from recon.densitometry import with_fill_ratios
 from recon.errors import CoronaryError
 from recon.geometry import MIN_VIEW_SEPARATION_DEG, ViewGeometry, view_separation_deg
 from recon.intensity import resolve_mapping
@@ -384,6 +386,9 @@ def reconstruct_pair(
     cl3d = build_centerline_3d(matching, view_a, cal.view_b, spacing_mm=options.spacing_mm)
     if junction is not None:
         cl3d = junction.join(cl3d)
+    # 5a. Densitometry: each view's attenuation across the vessel, calibrated where the
+    #     lumen is round, gives the area where the two calipers disagree.
+    cl3d = with_fill_ratios(cl3d, view_a, cal.view_b)
     metrics = table3_metrics(cl3d, matching, view_a, cal.view_b)
     lap("triangulate")
 

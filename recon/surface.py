@@ -27,6 +27,7 @@ from scipy.ndimage import maximum_filter1d, minimum_filter1d
 from scipy.spatial import cKDTree
 from skimage.measure import marching_cubes
 
+from recon.densitometry import densitometric_sections
 from recon.geometry import ViewGeometry
 from recon.types import Centerline3D, arclength
 
@@ -179,6 +180,13 @@ def intersection_directions(
     return line
 
 
+def _consistent_signs(major_dir: FloatArray) -> FloatArray:
+    """Axes (M, 3) with signs flipped so that neighbours point the same way."""
+    flips = np.sign(np.einsum("ij,ij->i", major_dir[1:], major_dir[:-1]))
+    flips[flips == 0] = 1.0
+    return major_dir * np.concatenate([[1.0], np.cumprod(flips)])[:, None]
+
+
 def elliptic_cross_sections(
     cl3d: Centerline3D, view_a: ViewGeometry, view_b: ViewGeometry
 ) -> CrossSections:
@@ -203,6 +211,13 @@ def elliptic_cross_sections(
     parallel (angle below 10 degrees) b is not observable and falls back to
     r_short; between 10 and 25 degrees the two values are blended linearly
     in the sine of the angle.
+
+    That construction treats the shorter half-length as a point of the ellipse; it is
+    the ellipse's support (caliper), so it is exact for circles only. Where ``cl3d``
+    has densitometric fill ratios (:func:`recon.densitometry.with_fill_ratios`) and
+    the two calipers disagree (:func:`recon.densitometry.densitometric_weight`), the
+    section becomes the ellipse with both calipers and the densitometric area
+    (:func:`recon.densitometry.blend_sections`), blended in as the calipers part.
     """
     X, T, r_a, r_b = _check_centerline(cl3d)
     l_a = intersection_directions(X, T, view_a)  # l_{a,i} = n_i x a_{a,i}
@@ -214,9 +229,7 @@ def elliptic_cross_sections(
     short_mm = np.minimum(r_a, r_b)
 
     # Consistent axis signs along the vessel (an ellipse axis is defined up to sign).
-    flips = np.sign(np.einsum("ij,ij->i", major_dir[1:], major_dir[:-1]))
-    flips[flips == 0] = 1.0
-    major_dir = major_dir * np.concatenate([[1.0], np.cumprod(flips)])[:, None]
+    major_dir = _consistent_signs(major_dir)
     minor_dir, _ = _unit(np.cross(T, major_dir))
 
     # Endpoint of the shorter intersection line in the (major, minor) frame.
@@ -231,6 +244,13 @@ def elliptic_cross_sections(
     weight = np.clip((sin_t - _SIN_PARALLEL_LO) / (_SIN_PARALLEL_HI - _SIN_PARALLEL_LO), 0, 1)
     weight = np.where(denom > 1e-9, weight, 0.0)
     minor_mm = weight * b_solved + (1.0 - weight) * short_mm
+
+    blended = densitometric_sections(cl3d, T, l_a, l_b, r_a, r_b, major_dir, major_mm,
+                                     minor_mm, weight)
+    if blended is not None:  # the densitometric area where the calipers disagree
+        major_dir, major_mm, minor_mm = blended
+        major_dir = _consistent_signs(major_dir)
+        minor_dir, _ = _unit(np.cross(T, major_dir))
 
     return CrossSections(
         centers=X,

@@ -208,6 +208,9 @@ def build_centerline_3d(
             np.where(overlap_a, radius_b_mm, radius_a_mm),
             np.where(overlap_b, radius_a_mm, radius_b_mm),
         )
+    depth_a = depth_b = None
+    if matching.centerline_a.depth is not None and matching.centerline_b.depth is not None:
+        depth_a, depth_b = along(matching.centerline_a.depth, matching.centerline_b.depth)
     return Centerline3D(
         X_world=X_out,
         s_mm=s_out,
@@ -219,6 +222,8 @@ def build_centerline_3d(
         points_b_px=pb,
         overlap_a=overlap_a,
         overlap_b=overlap_b,
+        depth_a=depth_a,
+        depth_b=depth_b,
     )
 
 

@@ -106,6 +106,9 @@ class Centerline2D:
     intensity_power : Box-Cox power of the stored values the radius fit used
         (0 = -log, values linear in intensity; 1 = linear in attenuation), or None.
     blur_px : Gaussian blur (px) of the radius model the fit used, or None.
+    depth : (N,) the profile fit's depth: absorption per px of chord of the fitted
+        circle template (:mod:`recon.profile_fit`), the densitometric signal of
+        :mod:`recon.densitometry`; None when not measured.
     """
 
     points_px: FloatArray
@@ -117,6 +120,7 @@ class Centerline2D:
     intensity_reason: str | None = None
     intensity_power: float | None = None
     blur_px: float | None = None
+    depth: FloatArray | None = None
 
     def __post_init__(self) -> None:
         n = len(self.points_px)
@@ -127,6 +131,8 @@ class Centerline2D:
         for name in ("radius_px", "brightness", "reliability"):
             if getattr(self, name).shape != (n,):
                 raise ValueError(f"{name} must be ({n},), got {getattr(self, name).shape}")
+        if self.depth is not None and np.shape(self.depth) != (n,):
+            raise ValueError(f"depth must be ({n},), got {np.shape(self.depth)}")
 
     @property
     def arclength_px(self) -> FloatArray:
@@ -165,6 +171,7 @@ class Centerline2D:
             brightness=np.interp(s_new, s, self.brightness[keep]),
             clicks_px=self.clicks_px,
             reliability=np.interp(s_new, s, np.asarray(self.reliability)[keep]),
+            depth=None if self.depth is None else np.interp(s_new, s, self.depth[keep]),
         )
 
 
@@ -220,6 +227,11 @@ class Centerline3D:
         be trusted (another vessel overlapping) and the other view's radius
         stands in for it (see :func:`recon.triangulation.build_centerline_3d`);
         all False when not given.
+    depth_a, depth_b : (M,) each view's profile-fit depth at the matched points
+        (:attr:`Centerline2D.depth`), or None.
+    fill_a, fill_b : (M,) the densitometric area over each view's caliper circle,
+        A / (pi r_k^2) (:func:`recon.densitometry.with_fill_ratios`), or None: then
+        the sections are built from the two calipers alone.
     """
 
     X_world: FloatArray
@@ -232,6 +244,10 @@ class Centerline3D:
     points_b_px: FloatArray
     overlap_a: NDArray[np.bool_] | None = None
     overlap_b: NDArray[np.bool_] | None = None
+    depth_a: FloatArray | None = None
+    depth_b: FloatArray | None = None
+    fill_a: FloatArray | None = None
+    fill_b: FloatArray | None = None
 
     def __post_init__(self) -> None:
         m = len(self.X_world)
@@ -239,6 +255,9 @@ class Centerline3D:
             if getattr(self, name) is None:
                 object.__setattr__(self, name, np.zeros(m, dtype=bool))
             elif np.shape(getattr(self, name)) != (m,):
+                raise ValueError(f"{name} must be ({m},), got {np.shape(getattr(self, name))}")
+        for name in ("depth_a", "depth_b", "fill_a", "fill_b"):
+            if getattr(self, name) is not None and np.shape(getattr(self, name)) != (m,):
                 raise ValueError(f"{name} must be ({m},), got {np.shape(getattr(self, name))}")
 
     @property

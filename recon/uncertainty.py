@@ -454,9 +454,16 @@ def measurement_intervals(
     wrong over each flagged stretch, i.e. its radius replaced by the other view's
     and the stretch's 3D path by the straight chord between the stretch's ends (a
     detour removed). The interval then spans both readings where, and only where,
-    the evidence is. Each flagged stretch also loses the local radius model's
+    the evidence is. Where the sections use the densitometric area
+    (:mod:`recon.densitometry`), its fill ratios are drawn too
+    (:func:`recon.densitometry.fill_draws`): the calibration's scatter and the two
+    views' disagreement on the area. Where the calipers agree the section is taken
+    to be round (an assumption: an ellipse at equal angles to both lines has equal
+    calipers too, and only the densitometric area, not used there, would tell).
+    Each flagged stretch also loses the local radius model's
     averaging (the disagreement there is evidence, not noise).
     """
+    from recon.densitometry import fill_draws
     from recon.geometry import triangulate
     from recon.measure import lumen_profile, measure_lumen
     from recon.surface import elliptic_cross_sections
@@ -480,6 +487,10 @@ def measurement_intervals(
     zs = posterior.sample_z(rng, n_samples)
     flags = [_flag_runs(f, len(s0)) for f in (flagged_a, flagged_b)]
     coins = rng.random((n_samples, 2)) < 0.5
+    # the densitometric area's error (its own stream: the other draws do not change)
+    dens = None
+    if centerline.fill_a is not None and centerline.fill_b is not None:
+        dens = fill_draws(centerline, n_samples, np.random.default_rng([seed, 14]))
     values: dict[str, list[float]] = {}
     radii = np.empty((n_samples, len(s0)))
     found = 0
@@ -501,6 +512,9 @@ def measurement_intervals(
             radius_a_mm=r_a * radius_mm_eq11(ones, X, view_a) / fa0 * np.exp(errors[k, 0]),
             radius_b_mm=r_b * radius_mm_eq11(ones, X, view_b) / fb0 * np.exp(errors[k, 1]),
         )
+        if dens is not None:
+            cl = replace(cl, fill_a=centerline.fill_a * dens[k, 0],
+                         fill_b=centerline.fill_b * dens[k, 1])
         area = elliptic_cross_sections(cl, view_a, view_b).area_mm2
         m = measure_lumen(lumen_profile(cl.s_mm, area))
         found += m.has_lesion

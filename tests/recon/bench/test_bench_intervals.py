@@ -47,10 +47,21 @@ def test_two_widths_leave_the_area_open() -> None:
     assert hi[0] / lo[0] > 1.3
 
 
-def test_bench_sections_measures_the_error_per_eccentricity() -> None:
+def test_bench_sections_measures_the_error_per_eccentricity(monkeypatch) -> None:
+    monkeypatch.setattr(sections, "_GEOMETRY_PER_IMAGE", 10_000)  # geometry only here
     result = sections.run(cases=600, seed=1)
     assert set(result["bins"]) == {"1.0-1.5", "1.5-2.0", "2.0-2.5"}
     assert sum(b["cases"] for b in result["bins"].values()) == result["cases"] == 600
     near_circle, flat = result["bins"]["1.0-1.5"], result["bins"]["2.0-2.5"]
     assert near_circle["median_abs_area_error_pct"] < flat["median_abs_area_error_pct"]
     assert near_circle["truth_in_ambiguity_range"] > 0.95
+    assert result["images"]["cases"] == 0
+
+
+def test_bench_sections_through_rendered_images(monkeypatch) -> None:
+    monkeypatch.setattr(sections, "_GEOMETRY_PER_IMAGE", 10)
+    result = sections.run(cases=20, seed=3)
+    images = result["images"]
+    assert images["cases"] + images["failed"] == 2
+    assert images["cases"] >= 1 and images["calibrated_share"] == 1.0
+    assert "through rendered images" in sections.format_table(result)
