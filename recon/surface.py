@@ -29,6 +29,7 @@ from skimage.measure import marching_cubes
 
 from recon.densitometry import densitometric_sections
 from recon.geometry import ViewGeometry
+from recon.mesh_repair import pieces, repair
 from recon.types import Centerline3D, arclength
 
 FloatArray = NDArray[np.float64]
@@ -43,7 +44,6 @@ __all__ = [
     "default_voxel_mm",
     "TreeSurface",
     "build_tree_surface",
-    "signed_volume",
 ]
 
 
@@ -513,52 +513,6 @@ def _marching_cubes_on_blocks(
     return all_verts[kept], new_index[all_faces]
 
 
-def _repair(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
-    """Largest component, no degenerate faces, outward winding."""
-    mesh.update_faces(mesh.nondegenerate_faces())
-    mesh.remove_unreferenced_vertices()
-    adjacency, closed, consistent = _shared_edges(mesh.faces)
-    labels = trimesh.graph.connected_component_labels(adjacency, len(mesh.faces))
-    if labels.size and labels.max() > 0:
-        keep = labels == np.bincount(labels).argmax()
-        mesh.update_faces(keep)
-        mesh.remove_unreferenced_vertices()
-        _, closed, consistent = _shared_edges(mesh.faces)
-    if not closed:
-        trimesh.repair.fill_holes(mesh)
-    if not (closed and consistent) and not mesh.is_winding_consistent:
-        trimesh.repair.fix_winding(mesh)
-    if signed_volume(mesh.vertices, mesh.faces) < 0:
-        mesh.invert()
-    return mesh
-
-
-def _shared_edges(faces: NDArray[np.int64]) -> tuple[NDArray[np.int64], bool, bool]:
-    """Pairs (P, 2) of faces (F, 3) sharing an edge that exactly two faces use; closed (all
-    edges so); consistently wound (each such edge run both ways): trimesh's ``face_adjacency``,
-    ``is_watertight``, ``is_winding_consistent`` from one sort of edge keys, not hashed rows."""
-    edges = faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2).astype(np.int64)  # face f: rows 3f..
-    lo, hi = np.minimum(edges[:, 0], edges[:, 1]), np.maximum(edges[:, 0], edges[:, 1])
-    key = lo * (int(faces.max()) + 1 if faces.size else 1) + hi
-    order = np.argsort(key, kind="stable")
-    sorted_key = key[order]
-    starts = np.flatnonzero(np.concatenate([[True], sorted_key[1:] != sorted_key[:-1]]))
-    counts = np.diff(np.concatenate([starts, [len(key)]]))
-    first, second = order[starts[counts == 2]], order[starts[counts == 2] + 1]
-    pairs = np.stack([first // 3, second // 3], axis=1)
-    return (pairs[pairs[:, 0] != pairs[:, 1]], bool(2 * len(first) == len(edges)),
-            bool(np.all(edges[first, 1] == edges[second, 0])))
-
-
-def signed_volume(vertices: FloatArray, faces: NDArray[np.int64]) -> float:
-    """Volume enclosed by a closed triangle mesh, vertices (V, 3), faces (F, 3): the sum
-    of the signed tetrahedra (origin, v0, v1, v2), v0 . (v1 x v2) / 6 (the divergence
-    theorem); negative when the faces wind inwards. (trimesh's ``volume`` integrates
-    the whole inertia tensor to get the same number.)"""
-    v0, v1, v2 = (vertices[faces[:, k]] for k in range(3))
-    return float(np.einsum("ij,ij->", v0, np.cross(v1, v2)) / 6.0)
-
-
 def build_surface(
     cl3d: Centerline3D,
     view_a: ViewGeometry,
@@ -611,7 +565,7 @@ def build_surface(
     wall_values[np.abs(wall_values) < tiny] = tiny
     verts, faces = _marching_cubes_on_blocks(shape, band, shell, wall_values, inner)
     mesh = trimesh.Trimesh(vertices=verts * voxel + lo, faces=faces, process=False)  # welded
-    mesh = _repair(mesh)
+    mesh = repair(mesh)
     return SurfaceResult(mesh=mesh, sections=sections, point_cloud=cloud, voxel_mm=voxel)
 
 
@@ -697,24 +651,7 @@ def build_tree_surface(
     verts, faces, _, _ = marching_cubes(grid, level=0.0, spacing=(voxel, voxel, voxel))
     del grid
     mesh = trimesh.Trimesh(vertices=verts + lo, faces=faces, process=True)
-    components, cavities = _pieces(mesh)
-    mesh = _repair(mesh)
+    components, cavities = pieces(mesh)
+    mesh = repair(mesh)
     return TreeSurface(mesh=mesh, components=components, voxel_mm=float(voxel),
                        grid_voxels=int(np.prod(shape)), cavities=cavities)
-
-
-def _pieces(mesh: trimesh.Trimesh) -> tuple[int, int]:
-    """(separate pieces, inner cavities) of a marching-cubes mesh.
-
-    Marching cubes winds every closed surface the same way about the inside,
-    so an outer piece has a signed volume of the largest piece's sign and a
-    cavity (an outside pocket within the inside) the opposite sign.
-    """
-    labels = trimesh.graph.connected_component_labels(mesh.face_adjacency, len(mesh.faces))
-    if not labels.size:
-        return 0, 0
-    v0, v1, v2 = (mesh.vertices[mesh.faces[:, k]] for k in range(3))
-    signed = np.bincount(labels, weights=np.einsum("ij,ij->i", v0, np.cross(v1, v2)) / 6.0)
-    largest = int(np.argmax(np.bincount(labels)))
-    outer = np.sign(signed) == np.sign(signed[largest])
-    return int(np.count_nonzero(outer)), int(np.count_nonzero(~outer))

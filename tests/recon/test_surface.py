@@ -239,7 +239,7 @@ def test_tree_surface_of_two_apart_vessels_has_two_components():
 def test_pieces_tells_a_second_vessel_from_a_cavity_inside_the_first():
     import trimesh
 
-    from recon.surface import _pieces
+    from recon.mesh_repair import pieces as _pieces
 
     outer = trimesh.creation.icosphere(radius=3.0)
     pocket = trimesh.creation.icosphere(radius=0.5)

@@ -8,6 +8,7 @@ import trimesh
 from scipy.spatial import cKDTree
 from skimage.measure import marching_cubes
 
+import recon.mesh_repair as mesh_repair
 import recon.surface as surface
 
 
@@ -75,7 +76,7 @@ def test_block_marching_cubes_without_a_surface_is_refused() -> None:
 
 
 def test_signed_volume_agrees_with_trimesh_and_tells_the_winding():
-    from recon.surface import signed_volume
+    from recon.mesh_repair import signed_volume
 
     box = trimesh.creation.box(extents=(2.0, 3.0, 4.0))
     box.apply_translation((5.0, -7.0, 11.0))  # away from the origin: the tetrahedra cancel
@@ -102,7 +103,7 @@ def test_shared_edges_agree_with_trimesh(case: str) -> None:
             "flipped": trimesh.Trimesh(box.vertices, flipped, process=False),
             "two pieces": trimesh.util.concatenate(
                 [box, box.copy().apply_translation([5.0, 0.0, 0.0])])}[case]
-    pairs, closed, consistent = surface._shared_edges(np.asarray(mesh.faces))
+    pairs, closed, consistent = mesh_repair.shared_edges(np.asarray(mesh.faces))
     assert _as_set(pairs) == _as_set(mesh.face_adjacency)
     assert closed == mesh.is_watertight
     assert consistent == mesh.is_winding_consistent
