@@ -20,7 +20,7 @@ from scipy import ndimage as ndi
 
 from recon.profile_fit import parabola_vertex_offset, sample_profiles
 
-__all__ = ["reference_width", "wall_offsets", "one_wall_shifts", "radius_off_walls"]
+__all__ = ["reference_width", "wall_offsets", "one_wall_shifts"]
 
 FloatArray = NDArray[np.float64]
 
@@ -65,17 +65,15 @@ def wall_offsets(absorb: FloatArray, points_px: FloatArray, normals: FloatArray,
     right_side = (offsets[None, :] >= 0.0) & (offsets[None, :] <= limit)
     k_left = np.argmax(np.where(left_side, grad, -np.inf), axis=1)
     k_right = np.argmin(np.where(right_side, grad, np.inf), axis=1)
-    rows = np.arange(len(points_px))
     left, right = _refine(grad, k_left, offsets), _refine(-grad, k_right, offsets)
     # No wall where the profile does not rise (fall), where the steepest slope is at
     # the end of the side searched, or near the point.
-    first = np.argmax(left_side, axis=1)
-    last = len(offsets) - 1 - np.argmax(right_side[:, ::-1], axis=1)
     inner = _INNER * radius_guess_px
-    left = np.where((grad[rows, k_left] <= 0) | (k_left <= first) | (left > -inner),
-                    np.nan, left)
-    right = np.where((grad[rows, k_right] >= 0) | (k_right >= last) | (right < inner),
-                     np.nan, right)
+    lim = limit[:, 0] - _STEP_PX
+    rows = np.arange(len(points_px))
+    left = np.where((grad[rows, k_left] <= 0) | (left > -inner) | (left < -lim), np.nan, left)
+    right = np.where((grad[rows, k_right] >= 0) | (right < inner) | (right > lim), np.nan,
+                     right)
     return left, right
 
 
@@ -89,9 +87,9 @@ def _refine(g: FloatArray, k: NDArray[np.intp], offsets: FloatArray) -> FloatArr
 
 def reference_width(width_px: FloatArray, fitted: NDArray[np.bool_]) -> FloatArray:
     """The running reference width (N,): the median over :data:`_WINDOW_PX` points
-    of the fitted widths, or their robust linear trend along the trace (Tukey's
-    biweight on log width) where the median is above it by more than 2.5 robust
-    standard deviations, so that
+    of the fitted widths, capped by their robust linear trend along the trace
+    (Tukey's biweight on log width) plus 2.5 robust standard deviations (at least
+    5 %), so that
     an overlap longer than half the window still stands out (a straight trend: a
     curved one could follow an overlap in the middle of the trace)."""
     idx = np.arange(len(width_px))
@@ -115,7 +113,7 @@ def reference_width(width_px: FloatArray, fitted: NDArray[np.bool_]) -> FloatArr
         weight = np.sqrt(np.where(np.abs(u) < 1.0, (1.0 - u**2) ** 2, 0.0))
         coef = np.linalg.lstsq(design[good] * weight[:, None], y * weight, rcond=None)[0]
     trend = np.exp(design @ coef)
-    return np.where(w_med > trend * np.exp(2.5 * sd), trend, w_med)
+    return np.minimum(w_med, trend * np.exp(2.5 * sd))
 
 
 def one_wall_shifts(shift_px: FloatArray, left_px: FloatArray, right_px: FloatArray,
@@ -165,20 +163,3 @@ def one_wall_shifts(shift_px: FloatArray, left_px: FloatArray, right_px: FloatAr
     done = pulled | keep_r | keep_l
     return new, done
 
-
-def radius_off_walls(radius_px: FloatArray, left_px: FloatArray, right_px: FloatArray,
-                     fitted: NDArray[np.bool_]) -> NDArray[np.bool_]:
-    """(N,) True where a profile fit's radius (N,) disagrees with the half-distance of
-    the walls (N,), (N,) by more than :data:`_PULL_SD` robust standard deviations of
-    the trace's fits (at least :data:`_PULL_PX`), after the median ratio of the two
-    (a neighbour inside the fit's window but beyond the wall widens the fit)."""
-    half = 0.5 * (right_px - left_px)
-    ok = fitted & np.isfinite(half) & (half > 0) & np.isfinite(radius_px)
-    out = np.zeros(len(radius_px), dtype=bool)
-    if int(ok.sum()) < 3:
-        return out
-    ratio = float(np.median(radius_px[ok] / half[ok]))
-    dev = radius_px - ratio * half
-    sd = 1.4826 * float(np.median(np.abs(dev[ok] - np.median(dev[ok]))))
-    out[ok] = np.abs(dev[ok]) > max(_PULL_PX, _PULL_SD * sd)
-    return out

@@ -36,7 +36,7 @@ def test_reference_width_is_not_pulled_by_an_overlap_in_the_middle() -> None:
     width = np.full(300, 8.5)
     width[100:200] = 14.4  # a third of the trace: the running median alone follows it
     ref = reference_width(width, np.ones(300, dtype=bool))
-    assert np.all(np.abs(ref - 8.5) < 0.3)
+    assert np.all((ref >= 8.5) & (ref < 8.5 * 1.06))  # at most the trend + 5 %
 
 
 def test_one_wall_shifts_centres_on_the_wall_that_stayed() -> None:
@@ -51,7 +51,9 @@ def test_one_wall_shifts_centres_on_the_wall_that_stayed() -> None:
     shift[220:240] = -1.5
     new, done = one_wall_shifts(shift, left, right, np.ones(n, dtype=bool))
     assert np.all(done[100:200]) and np.all(done[220:240])
-    assert np.all(np.abs(new[100:200]) < 0.25)  # 4.2 inside the right wall (noise 0.05)
+    # half the reference width inside the right wall: 4.2 + 5 % (the cap's least margin
+    # over the trend of 8.4), so -0.21 px, within the walls' noise
+    assert np.all(np.abs(new[100:200] + 0.21) < 0.25)
     assert np.all(np.abs(new[220:240] - (-0.35)) < 0.2)  # the walls' midpoint
     assert not np.any(done[:90]) and not np.any(done[250:])
     np.testing.assert_array_equal(new[:90], shift[:90])
