@@ -58,7 +58,6 @@ from recon.trace_error import TraceError
 from recon.trace_path import find_route_problem, minimal_route
 from recon.types import Centerline2D, arclength
 from recon.vesselness import VesselnessMap, compute_vesselness
-from recon.walls import one_wall_shifts, wall_offsets
 
 __all__ = [
     "TraceError",
@@ -94,12 +93,6 @@ _R_CAP_PX = 40.0
 #: of the shifts' outlier test.
 _TUKEY_C = 4.685
 _MIN_CUTOFF_PX = 1.0
-#: Weight of a centre taken from one wall (recon.walls), at most, and the reliability
-#: (below triangulation.OVERLAP_RELIABILITY) of a radius where a neighbour overlaps.
-_WALL_WEIGHT = 0.6
-_CROWDED_RELIABILITY = 0.25
-#: The walls are not used within this many lumen radii of a trace's ends.
-_END_WALLS = 2.0
 #: Lumen radii at each end of a trace over which the radius is held (no end dip).
 _END_HOLD = 1.5
 #: Box-Cox power of the absorption used for centring before the mapping is known
@@ -174,32 +167,6 @@ def _reliability(radius_px: FloatArray, rss: FloatArray, fitted: NDArray[np.bool
     ratio = np.clip(rss / max(_RSS_TOL * rss_ref, 1e-30) - 1.0, 0.0, None)
     w_fit = 1.0 / (1.0 + ratio) / (1.0 + (excess / 0.1) ** 2)
     return np.where(fitted, np.clip(w_fit, 1e-3, 1.0), 1e-3)
-
-
-def _near_ends(radius_px: FloatArray, spacing_px: float = 1.0) -> NDArray[np.bool_]:
-    """(N,) True within :data:`_END_WALLS` lumen radii (N,) of either end of a trace
-    sampled ``spacing_px`` apart: an end clicked where the vessel leaves another one
-    lies in their common lumen, where neither wall is the vessel's own."""
-    n = len(radius_px)
-    reach = int(np.ceil(_END_WALLS * float(np.median(radius_px)) / spacing_px))
-    idx = np.arange(n)
-    return (idx < reach) | (idx >= n - reach)
-
-
-def _crowded(absorb: FloatArray, points_px: FloatArray, normals: FloatArray,
-             radius_px: FloatArray, fitted: NDArray[np.bool_], spacing_px: float
-             ) -> NDArray[np.bool_]:
-    """(N,) True where a neighbour overlaps one side of the trace's points (N, 2),
-    ``spacing_px`` apart, with fitted radii (N,): :func:`recon.walls.one_wall_shifts`
-    would move the centre there (tested at points ~1 px apart, each result spread to
-    the points after it). Not widened: a stretch next to a lesion would be bridged
-    into the lesion (phantom data2/5: volume -5.7 % with a lumen diameter more)."""
-    step = max(int(round(1.0 / spacing_px)), 1)
-    sub = np.arange(0, len(points_px), step)
-    r_sub = np.nan_to_num(radius_px[sub], nan=1.0)
-    left, right = wall_offsets(absorb, points_px[sub], normals[sub], np.maximum(r_sub, 1.0))
-    _, moved = one_wall_shifts(np.zeros(len(sub)), left, right, fitted[sub])
-    return np.repeat(moved, step)[: len(points_px)]
 
 
 def _robust_shift(shift_px: FloatArray, weight: FloatArray,
@@ -470,14 +437,7 @@ def trace_segment(
         shift, radius1, ok, rss = fit.shift_px, fit.radius_px, fit.ok, fit.rss
         fitted = np.isfinite(rss) & np.isfinite(radius1)
         fitted[[0, -1]] = True
-        # A neighbour overlapping one side: centre inside the wall that stayed (recon.walls).
-        left, right = wall_offsets(absorb, coarse - origin, normals, r_guess)
-        shift, walled = one_wall_shifts(shift, left, right, fitted & ~_near_ends(r_guess))
         weight = _reliability(radius1, rss, fitted)
-        if np.any(walled):
-            ok = ok.copy()
-            ok[walled] = True
-            weight[walled] = _WALL_WEIGHT * np.maximum(weight[walled], 0.5)
         _, inlier, scatter_px = _robust_shift(shift, weight * fitted, r_guess)
         weight = weight * np.maximum(inlier, 1e-3)
         refined = coarse + shift[:, None] * normals
@@ -559,14 +519,7 @@ def trace_segment(
                          view=view)
     reliability = _reliability(radius, rss2, ok2)
     idx = np.arange(len(points))
-    # Where a neighbour overlaps one side (recon.walls), the profile there is not one
-    # tube: its radius is bridged from the clean fits on either side, and the other
-    # view's radius is taken in 3D (low reliability).
-    crowded = _crowded(absorb, points - origin, normals, radius,
-                       ok2 & ~_near_ends(r_guess, spacing_px), spacing_px)
-    reliability = np.where(crowded, np.minimum(reliability, _CROWDED_RELIABILITY), reliability)
-    use = ok2 & ~crowded if np.count_nonzero(ok2 & ~crowded) >= 2 else ok2
-    radius = np.interp(idx, idx[use], radius[use])
+    radius = np.interp(idx, idx[ok2], radius[ok2])
     radius = _hold_ends(_smooth_radius(radius, spacing_px), spacing_px)
     # the densitometric signal (recon.densitometry), smoothed like the radius
     depth = _smooth_radius(np.interp(idx, idx[ok2], fit2.depth[ok2]), spacing_px)
