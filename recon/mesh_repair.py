@@ -59,8 +59,13 @@ def signed_volume(vertices: FloatArray, faces: NDArray[np.int64]) -> float:
     of the signed tetrahedra (origin, v0, v1, v2), v0 . (v1 x v2) / 6 (the divergence
     theorem); negative when the faces wind inwards. (trimesh's ``volume`` integrates
     the whole inertia tensor to get the same number.)"""
+    return float(np.sum(_face_volumes(vertices, faces)))
+
+
+def _face_volumes(vertices: FloatArray, faces: NDArray[np.int64]) -> FloatArray:
+    """Signed volume (F,) of each face's tetrahedron with the origin, v0 . (v1 x v2) / 6."""
     v0, v1, v2 = (vertices[faces[:, k]] for k in range(3))
-    return float(np.einsum("ij,ij->", v0, np.cross(v1, v2)) / 6.0)
+    return np.einsum("ij,ij->i", v0, np.cross(v1, v2)) / 6.0
 
 
 def pieces(mesh: trimesh.Trimesh) -> tuple[int, int]:
@@ -73,8 +78,7 @@ def pieces(mesh: trimesh.Trimesh) -> tuple[int, int]:
     labels = trimesh.graph.connected_component_labels(mesh.face_adjacency, len(mesh.faces))
     if not labels.size:
         return 0, 0
-    v0, v1, v2 = (mesh.vertices[mesh.faces[:, k]] for k in range(3))
-    signed = np.bincount(labels, weights=np.einsum("ij,ij->i", v0, np.cross(v1, v2)) / 6.0)
+    signed = np.bincount(labels, weights=_face_volumes(mesh.vertices, mesh.faces))
     largest = int(np.argmax(np.bincount(labels)))
     outer = np.sign(signed) == np.sign(signed[largest])
     return int(np.count_nonzero(outer)), int(np.count_nonzero(~outer))

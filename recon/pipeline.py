@@ -56,6 +56,7 @@ __all__ = [
     "Reconstruction",
     "calibrate_from_seeds",
     "calibrate_view_b",
+    "check_calibration",
     "input_warnings",
     "reconstruct_pair",
 ]
@@ -254,6 +255,13 @@ def _features(seeds: Seeds, segment_index: int, cl_a: Centerline2D | None = None
     return np.vstack(pa), np.vstack(pb)
 
 
+def check_calibration(options: ReconstructionOptions) -> None:
+    """Refuse an ``options.calibration`` that is not a rule of :data:`CALIBRATION_CHOICES`."""
+    if options.calibration not in CALIBRATION_CHOICES:
+        raise PipelineError(f"unknown calibration {options.calibration!r} (use one of "
+                            f"{', '.join(CALIBRATION_CHOICES)})")
+
+
 def calibrate_view_b(
     view_a: ViewGeometry, view_b_header: ViewGeometry, feat_a: np.ndarray, feat_b: np.ndarray,
     options: ReconstructionOptions, curves: tuple[np.ndarray, np.ndarray] | None = None,
@@ -261,9 +269,7 @@ def calibrate_view_b(
     """View B calibrated on the corresponding features (K, 2) per view by the rule
     ``options.calibration`` (:class:`ReconstructionOptions`); ``curves`` are the traced
     centerlines (N, 2) per view that the "curves" rule adds (ignored by the others)."""
-    if options.calibration not in CALIBRATION_CHOICES:
-        raise PipelineError(f"unknown calibration {options.calibration!r} (use one of "
-                            f"{', '.join(CALIBRATION_CHOICES)})")
+    check_calibration(options)
     cal = calibrate_supported(view_a, view_b_header, feat_a, feat_b, method=options.optimizer,
                               candidates=CALIBRATION_CHOICES[options.calibration])
     if options.calibration == "curves" and curves is not None:
@@ -330,9 +336,7 @@ def reconstruct_pair(
     """
     options = options or ReconstructionOptions()
     seg = _segment(seeds, options.segment)
-    if options.calibration not in CALIBRATION_CHOICES:
-        raise PipelineError(f"unknown calibration {options.calibration!r} (use one of "
-                            f"{', '.join(CALIBRATION_CHOICES)})")
+    check_calibration(options)
     view_a, view_b_header = angio_a.geometry, angio_b.geometry
     close_views = _check_separation(view_a, view_b_header, options.allow_close_views)
     timings: dict[str, float] = {}

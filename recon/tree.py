@@ -33,7 +33,6 @@ from recon.matching import match_centerlines
 from recon.measure import lumen_profile, measure_lumen
 from recon.optimal_view import optimal_view
 from recon.pipeline import (
-    CALIBRATION_CHOICES,
     PipelineError,
     Progress,
     Reconstruction,
@@ -42,6 +41,7 @@ from recon.pipeline import (
     _notify,
     _trace,
     calibrate_view_b,
+    check_calibration,
     reconstruct_pair,
 )
 from recon.seeds import Seeds, Segment
@@ -182,9 +182,7 @@ def reconstruct_tree(
     options = options or ReconstructionOptions()
     if not seeds.segments:
         raise PipelineError("seeds: no segment to reconstruct (segments is empty)")
-    if options.calibration not in CALIBRATION_CHOICES:
-        raise PipelineError(f"unknown calibration {options.calibration!r} (use one of "
-                            f"{', '.join(CALIBRATION_CHOICES)})")
+    check_calibration(options)
     _check_separation(angio_a.geometry, angio_b.geometry, options.allow_close_views)
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
