@@ -293,10 +293,13 @@ def clear_results(scene: viser.SceneApi, views: Mapping[str, View]) -> None:
             log.debug("nothing to remove at %s", name, exc_info=True)
 
 
-def diameter_colors(d_mm: FloatArray, ref_mm: float) -> NDArray[np.uint8]:
-    """RGB (N, 3) for lumen diameters: red at or below half the reference, yellow at 75 %,
-    green at the reference and above (the usual QCA colour scale)."""
-    r = np.clip(np.asarray(d_mm, float) / max(float(ref_mm), 1e-6), 0.5, 1.0)
+def diameter_colors(d_mm: FloatArray, ref_mm: float | FloatArray) -> NDArray[np.uint8]:
+    """RGB (N, 3) for lumen diameters (N,) against their reference diameters (a scalar
+    or (N,), the tapering healthy reference at each point): red at or below half the
+    reference, yellow at 75 %, green at the reference and above (the usual QCA colour
+    scale)."""
+    ref = np.maximum(np.asarray(ref_mm, float), 1e-6)
+    r = np.clip(np.asarray(d_mm, float) / ref, 0.5, 1.0)
     stops = np.array([0.5, 0.75, 1.0])
     rgb = np.stack([np.interp(r, stops, [220, 240, 40]), np.interp(r, stops, [30, 200, 180]),
                     np.interp(r, stops, [30, 40, 70])], axis=1)
@@ -391,8 +394,12 @@ def draw_reconstruction(
     model_position = np.array([0.0, image_top - 0.12 - MODEL_SIZE / 2, 0.0])
     prof = rec.profile
     d_mm = np.interp(s, prof.s_mm, prof.diameter_smooth_mm)
+    # Against the local (tapering) reference: a healthy distal vessel stays green.
+    ref_all = np.asarray(prof.reference_diameter_mm, float)
+    ref_mm = np.interp(s, prof.s_mm, np.where(np.isfinite(ref_all), ref_all,
+                                              float(np.nanmax(ref_all))))
     _, nearest = cKDTree(X).query(np.asarray(mesh.vertices))
-    colors = diameter_colors(d_mm[nearest], float(np.nanmax(prof.reference_diameter_mm)))
+    colors = diameter_colors(d_mm[nearest], ref_mm[nearest])
     T = np.eye(4)
     T[:3, :3] = scale * R
     T[:3, 3] = model_position - scale * (lo + hi) / 2
@@ -408,7 +415,8 @@ def draw_reconstruction(
         np.float32), (40, 40, 40), thickness=1.5, thickness_units="screen")
     m = rec.measurements
     scene.add_label("/model/title", f"3D model, {m.segment_length_mm:.1f} mm, coloured by "
-                    "diameter (green = reference, red = half of it); drag to rotate",
+                    "diameter against the local reference (green = reference, red = half of "
+                    "it); drag to rotate",
                     position=(-views["a"].render_w - IMAGE_GAP / 2,
                               model_position[1] - MODEL_SIZE / 2, 0.0),
                     anchor="top-left")

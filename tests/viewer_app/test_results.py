@@ -167,6 +167,11 @@ def test_diameter_colour_scale() -> None:
     assert rgb.dtype == np.uint8 and rgb.shape == (4, 3)
     assert tuple(rgb[0]) == (220, 30, 30)  # half the reference or less: red
     assert tuple(rgb[2]) == tuple(rgb[3]) == (40, 180, 70)  # at the reference: green
+    # Against a tapering reference: a healthy distal vessel (2 mm where the reference
+    # is 2 mm) is green, a 2 mm narrowing where it is 4 mm is red-orange.
+    taper = diameter_colors(np.array([4.0, 2.0, 2.0]), np.array([4.0, 4.0, 2.0]))
+    assert tuple(taper[0]) == tuple(taper[2]) == (40, 180, 70)
+    assert tuple(taper[1]) == (220, 30, 30)
 
 
 def test_results_show_the_95_pct_interval_beside_the_value() -> None:
