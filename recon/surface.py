@@ -339,12 +339,15 @@ def _tube_sdf(points: FloatArray, sections: CrossSections, tree: cKDTree) -> Flo
     best_d2 = np.full(len(points), np.inf)
     best_seg = np.zeros(len(points), dtype=np.int64)
     best_tau = np.zeros(len(points))
+    coords = [np.ascontiguousarray(points[:, k]) for k in range(3)]
     for cand in (np.clip(nearest - 1, 0, m - 2), np.clip(nearest, 0, m - 2)):
         p0 = X[cand]
         seg = X[cand + 1] - p0
         seg_len2 = np.maximum(np.einsum("ij,ij->i", seg, seg), 1e-18)
         tau = np.clip(np.einsum("ij,ij->i", points - p0, seg) / seg_len2, 0.0, 1.0)
-        d2 = np.sum((points - p0 - tau[:, None] * seg) ** 2, axis=1)
+        # |points - p0 - tau seg|^2 one coordinate at a time, summed in np.sum's order
+        r = [(coords[k] - p0[:, k]) - tau * seg[:, k] for k in range(3)]
+        d2 = r[0] * r[0] + r[1] * r[1] + r[2] * r[2]
         better = d2 < best_d2
         best_d2 = np.where(better, d2, best_d2)
         best_seg = np.where(better, cand, best_seg)
