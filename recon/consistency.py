@@ -276,8 +276,11 @@ def nearest_on_polyline(
     for lo in range(0, len(p), chunk):
         pc = p[lo:lo + chunk, None, :]  # (C, 1, 2)
         t = np.clip(np.einsum("csk,sk->cs", pc - a[None], d) / dd[None], 0.0, 1.0)
-        foot = a[None] + t[..., None] * d[None]  # (C, S, 2)
-        r = np.linalg.norm(pc - foot, axis=2)
+        # |pc - foot| with foot = a + t d, written per coordinate: np.linalg.norm's bits
+        # without its reduction over an axis of two
+        dx = pc[..., 0] - (a[None, :, 0] + t * d[None, :, 0])
+        dy = pc[..., 1] - (a[None, :, 1] + t * d[None, :, 1])
+        r = np.sqrt(dx * dx + dy * dy)
         k = np.argmin(r, axis=1)
         rows = np.arange(len(k))
         dist[lo:lo + chunk] = r[rows, k]

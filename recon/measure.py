@@ -31,6 +31,7 @@ Definitions used here (documented because QCA packages differ):
 
 from __future__ import annotations
 
+import functools
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -145,15 +146,24 @@ def savgol_cubic(values: FloatArray, window: int) -> FloatArray:
     """
     values = np.asarray(values, dtype=float)
     half = window // 2
-    z = np.arange(window, dtype=float) - half
-    vander = z[:, None] ** np.arange(4)  # (window, 4)
-    hat = vander @ np.linalg.pinv(vander)  # (window, window): samples -> fitted values
+    hat = _savgol_hat(window)
     out = np.empty_like(values)
     out[half:len(values) - half] = np.lib.stride_tricks.sliding_window_view(
         values, window) @ hat[half]
     out[:half] = hat[:half] @ values[:window]
     out[len(values) - half:] = hat[window - half:] @ values[-window:]
     return out
+
+
+@functools.lru_cache(maxsize=64)
+def _savgol_hat(window: int) -> FloatArray:
+    """(window, window) read-only matrix taking a window's samples to the values of their
+    least-squares cubic (one per window length: the intervals' draws share it)."""
+    z = np.arange(window, dtype=float) - window // 2
+    vander = z[:, None] ** np.arange(4)  # (window, 4)
+    hat = vander @ np.linalg.pinv(vander)
+    hat.setflags(write=False)
+    return hat
 
 
 def _lesion_extent(s_mm: FloatArray, deficit: FloatArray, peak: int) -> tuple[float, float]:

@@ -136,6 +136,18 @@ def _rig(alpha_deg: FloatArray, beta_deg: FloatArray, sod_mm: float
     return -sod_mm * d, d, u, np.cross(u, d)
 
 
+def _pair_distances(p: FloatArray, q: FloatArray) -> FloatArray:
+    """(C, N, M) distances between the points p (C, N, 2) and q (C, M, 2) of each view:
+    ``np.linalg.norm(p[:, :, None] - q[:, None], axis=3)`` to the bit, without reducing
+    over an axis of two (which numpy does element by element)."""
+    dx = p[:, :, None, 0] - q[:, None, :, 0]
+    dy = p[:, :, None, 1] - q[:, None, :, 1]
+    dx *= dx
+    dy *= dy
+    dx += dy
+    return np.sqrt(dx, out=dx)
+
+
 def optimal_view(
     X_world: ArrayLike,
     radius_mm: ArrayLike,
@@ -179,13 +191,11 @@ def optimal_view(
     p = plane_mm(Xs)  # (C, N, 2)
     reach = rs[:, None] + rs[None]
     far = np.abs(s_pts[:, None] - s_pts[None]) > NEIGHBOUR_MM + 2 * reach
-    dist = np.linalg.norm(p[:, :, None] - p[:, None], axis=3)  # (C, N, N)
-    hit = np.any(far[None] & (dist < reach[None]), axis=2)
+    hit = np.any(far[None] & (_pair_distances(p, p) < reach[None]), axis=2)
     for Xo, ro in others:
         Xo, ro, _ = _resample(np.asarray(Xo, float).reshape(-1, 3),
                               np.asarray(ro, float).reshape(-1), SAMPLE_MM)
-        q = plane_mm(Xo)
-        dq = np.linalg.norm(p[:, :, None] - q[:, None], axis=3)
+        dq = _pair_distances(p, plane_mm(Xo))
         hit |= np.any(dq < (rs[:, None] + ro[None])[None], axis=2)
     ov = (100.0 * hit.mean(axis=1)).reshape(B.shape)
     score = fs + ov

@@ -339,12 +339,15 @@ def _tube_sdf(points: FloatArray, sections: CrossSections, tree: cKDTree) -> Flo
     best_d2 = np.full(len(points), np.inf)
     best_seg = np.zeros(len(points), dtype=np.int64)
     best_tau = np.zeros(len(points))
+    coords = [np.ascontiguousarray(points[:, k]) for k in range(3)]
     for cand in (np.clip(nearest - 1, 0, m - 2), np.clip(nearest, 0, m - 2)):
         p0 = X[cand]
         seg = X[cand + 1] - p0
         seg_len2 = np.maximum(np.einsum("ij,ij->i", seg, seg), 1e-18)
         tau = np.clip(np.einsum("ij,ij->i", points - p0, seg) / seg_len2, 0.0, 1.0)
-        d2 = np.sum((points - p0 - tau[:, None] * seg) ** 2, axis=1)
+        # |points - p0 - tau seg|^2 one coordinate at a time, summed in np.sum's order
+        r = [(coords[k] - p0[:, k]) - tau * seg[:, k] for k in range(3)]
+        d2 = r[0] * r[0] + r[1] * r[1] + r[2] * r[2]
         better = d2 < best_d2
         best_d2 = np.where(better, d2, best_d2)
         best_seg = np.where(better, cand, best_seg)
@@ -397,13 +400,19 @@ def _ball_voxels(
     counts = np.searchsorted(norm, np.maximum(radius_vox, -1.0), side="right")
     within = np.arange(int(counts.sum())) - np.repeat(np.cumsum(counts) - counts, counts)
     dims = np.asarray(shape)
-    if np.all(base.min(axis=0) >= r_max) and np.all(base.max(axis=0) + r_max < dims):
+    strides = np.array([shape[1] * shape[2], shape[2], 1], dtype=np.int64)
+    reach = np.ceil(np.maximum(radius_vox, 0.0)).astype(np.int64)
+    inside = np.all((base >= reach[:, None]) & (base + reach[:, None] < dims), axis=1)
+    if np.all(inside):
         # no ball leaves the grid: flat index of the centre plus the offset's
-        strides = np.array([shape[1] * shape[2], shape[2], 1], dtype=np.int64)
         return np.repeat(base @ strides, counts) + (grid @ strides)[within]
-    owner = np.repeat(np.arange(len(base)), counts)
-    idx = np.clip(base[owner] + grid[within], 0, dims - 1)
-    return np.ravel_multi_index(idx.T, shape)
+    # the balls within the grid as above, the others' voxels clipped to it (the same set)
+    ball_of = np.repeat(inside, counts)
+    flat_in = np.repeat(base[inside] @ strides, counts[inside]) + (grid @ strides)[within[ball_of]]
+    edge = ~inside
+    owner = np.repeat(np.flatnonzero(edge), counts[edge])
+    idx = np.clip(base[owner] + grid[within[~ball_of]], 0, dims - 1)
+    return np.concatenate([flat_in, np.ravel_multi_index(idx.T, shape)])
 
 
 def _shell_voxels(
@@ -460,7 +469,7 @@ def _marching_cubes_on_blocks(
     n_cells = np.asarray(shape) - 1
     n_blocks = -(-n_cells // _MC_BLOCK)
     occupied = np.zeros(n_blocks, dtype=bool)
-    corner = np.unravel_index(wall, shape)
+    corner = np.stack(np.unravel_index(wall, shape))  # (3, N)
     block_of = [np.minimum(c // _MC_BLOCK, n - 1) for c, n in zip(corner, n_blocks, strict=True)]
     occupied[tuple(block_of)] = True
     # A voxel on a block's lower face is also a corner of the cells of the block below.
@@ -474,18 +483,25 @@ def _marching_cubes_on_blocks(
     side = _MC_BLOCK + 1
     block_stride = np.array([n_blocks[1] * n_blocks[2], n_blocks[2], 1])
     corner_stride = np.array([side * side, side, 1])
-    for flat, values in ((inner, np.full(len(inner), -band)), (wall, wall_values)):
-        ijk = np.stack(np.unravel_index(flat, shape), axis=1)
-        keep = np.all((ijk > 0) & (ijk < n_cells), axis=1)  # the outer layer stays +band
-        ijk, values = ijk[keep], np.asarray(values, dtype=np.float32)[keep]
+    slot_flat, corners_flat = slot.reshape(-1), corners.reshape(-1)
+    for ijk, values in ((np.stack(np.unravel_index(inner, shape)), np.full(len(inner), -band)),
+                        (corner, wall_values)):
+        keep = np.logical_and.reduce((ijk > 0) & (ijk < n_cells[:, None]))  # the outer layer
+        ijk, values = ijk[:, keep], np.asarray(values, dtype=np.float32)[keep]  # stays +band
         block, local = ijk // _MC_BLOCK, ijk % _MC_BLOCK
         can = (local == 0) & (block > 0)  # on a block's lower face: the block below's too
+        block_flat, local_flat = block_stride @ block, corner_stride @ local
         for use_below in np.ndindex(2, 2, 2):
             below = np.asarray(use_below, dtype=bool)
-            sel = np.flatnonzero(np.all(can | ~below, axis=1))
-            k = slot.reshape(-1)[(block[sel] - below) @ block_stride]
-            at = k * side**3 + np.where(below, _MC_BLOCK, local[sel]) @ corner_stride
-            corners.reshape(-1)[at[k >= 0]] = values[sel][k >= 0]
+            if below.any():
+                sel = np.flatnonzero(np.logical_and.reduce(can[below]))
+                # on the face of the block below: that block's last corner along the axis
+                k = slot_flat[block_flat[sel] - block_stride @ below]
+                at = k * side**3 + local_flat[sel] + corner_stride @ (below * _MC_BLOCK)
+                corners_flat[at[k >= 0]] = values[sel][k >= 0]
+            else:
+                k = slot_flat[block_flat]
+                corners_flat[(k * side**3 + local_flat)[k >= 0]] = values[k >= 0]
     verts: list[FloatArray] = []
     faces: list[NDArray[np.int64]] = []
     n_verts, on_face = 0, []

@@ -260,6 +260,14 @@ def point_polyline_distance(
     a, seg = L[:-1], np.diff(L, axis=0)  # (M-1, D)
     seg_len2 = np.maximum(np.einsum("md,md->m", seg, seg), 1e-24)
     out = np.empty(len(P))
+    if P.shape[1] == 2:  # image points: the same sums per coordinate, without (n, M-1, 2)
+        for start in range(0, len(P), chunk):  # temporaries (einsum's bits for D = 2)
+            p = P[start : start + chunk]
+            wx, wy = p[:, None, 0] - a[None, :, 0], p[:, None, 1] - a[None, :, 1]
+            u = np.clip((wx * seg[:, 0] + wy * seg[:, 1]) / seg_len2, 0.0, 1.0)
+            dx, dy = wx - u * seg[:, 0], wy - u * seg[:, 1]
+            out[start : start + chunk] = np.sqrt((dx * dx + dy * dy).min(axis=1))
+        return out
     for start in range(0, len(P), chunk):
         p = P[start : start + chunk]
         w = p[:, None, :] - a[None, :, :]  # (n, M-1, D)

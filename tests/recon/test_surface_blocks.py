@@ -109,3 +109,24 @@ def test_shared_edges_agree_with_trimesh(case: str) -> None:
     assert consistent == mesh.is_winding_consistent
     assert (closed, consistent) == {"tube": (True, True), "open": (False, True),
                                     "flipped": (True, False), "two pieces": (True, True)}[case]
+
+
+def test_ball_voxels_are_the_clipped_balls_near_and_away_from_the_edges() -> None:
+    """surface._ball_voxels: the voxels within each ball's radius of its centre, clipped
+    to the grid, whether a ball lies inside the grid, reaches past its edge, or is empty."""
+    rng = np.random.default_rng(3)
+    shape = (14, 17, 11)
+    base = np.concatenate([rng.integers(0, shape, size=(20, 3)),  # many reach past an edge
+                           np.array([[7, 8, 5], [0, 0, 0], [13, 16, 10]])])
+    radius = np.concatenate([rng.uniform(0.0, 4.5, 20), [3.2, -1.0, 2.0]])
+    got = surface._ball_voxels(base, radius, shape)
+    ii, jj, kk = np.meshgrid(*(np.arange(-5, 6),) * 3, indexing="ij")
+    offsets = np.stack([ii.ravel(), jj.ravel(), kk.ravel()], axis=1)
+    norm = np.linalg.norm(offsets, axis=1)
+    expected = set()
+    for b, r in zip(base, radius, strict=True):
+        idx = np.clip(b + offsets[norm <= r], 0, np.asarray(shape) - 1)
+        expected |= set(np.ravel_multi_index(idx.T, shape).tolist())
+    assert set(got.tolist()) == expected
+    inside = surface._ball_voxels(base[:1] * 0 + 7, radius[:1], shape)  # one ball, inside
+    assert len(inside) == np.count_nonzero(norm <= radius[0])

@@ -188,3 +188,19 @@ def test_overlap_in_both_views_keeps_both_radii():
     mid = c3.s_mm / c3.length_mm
     inside = (mid > 0.45) & (mid < 0.55)
     assert not np.any(c3.overlap_a[inside]) and not np.any(c3.overlap_b[inside])
+
+
+def test_point_polyline_distance_in_the_image_plane_is_that_in_space() -> None:
+    """The 2D path (per coordinate) gives the distances of the general one: a random
+    polyline and points laid in the z = 0 plane of 3D, and hand-checked distances."""
+    rng = np.random.default_rng(5)
+    line = np.cumsum(rng.normal(size=(300, 2)) * 4.0, axis=0)
+    pts = rng.uniform(-60.0, 60.0, size=(700, 2)) + line.mean(axis=0)
+    flat = point_polyline_distance(pts, line, chunk=64)
+    lifted = point_polyline_distance(np.c_[pts, np.zeros(len(pts))],
+                                     np.c_[line, np.zeros(len(line))], chunk=64)
+    np.testing.assert_allclose(flat, lifted, rtol=1e-12, atol=1e-12)
+    square = np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 10.0]])
+    np.testing.assert_allclose(point_polyline_distance(
+        np.array([[5.0, -3.0], [13.0, 5.0], [14.0, 13.0], [5.0, 4.0]]), square),
+        [3.0, 3.0, 5.0, 4.0])
