@@ -82,7 +82,7 @@ __all__ = [
 MATCHERS = ("match1", "match2", "match3", "match4")
 MAX_POINTS = 1000  # the DP is O(N^2) in memory: both traces are resampled to at most this
 FIXED_STEP = 2  # match2's step (CBOCD "other")
-NARROWING_WEIGHT_PX = 4.0  # px of COST per unit of (normalised) narrowing difference; ours
+NARROWING_WEIGHT_PX = 10.0  # px of COST per unit of (normalised) narrowing difference; ours
 NARROWING_FIT_ITERATIONS = 5
 NARROWING_MIN = 0.2  # the term is used only when both traces narrow at least this much
 
