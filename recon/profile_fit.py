@@ -284,10 +284,14 @@ def sample_profiles(
     """Samples (N, L) of ``image`` at points_px + offsets * normals: bilinear
     (``order=1``), or cubic B-spline (``order=3``; ``image`` holds the coefficients
     of :func:`spline_coefficients`)."""
-    pos = points_px[:, None, :] + offsets[None, :, None] * normals[:, None, :]  # (N, L, 2)
-    coords = np.stack([pos[..., 1].ravel(), pos[..., 0].ravel()])
-    out = ndi.map_coordinates(image, coords, order=order, mode="mirror", prefilter=False)
-    return out.reshape(pos.shape[:2])
+    n, m = len(points_px), len(offsets)
+    coords = np.empty((2, n, m))  # (row, col) of points_px + offsets * normals
+    for k, axis in enumerate((1, 0)):
+        np.multiply(offsets[None, :], normals[:, axis, None], out=coords[k])
+        coords[k] += points_px[:, axis, None]
+    out = ndi.map_coordinates(image, coords.reshape(2, n * m), order=order, mode="mirror",
+                              prefilter=False)
+    return out.reshape(n, m)
 
 
 @dataclass(frozen=True)

@@ -236,8 +236,9 @@ def _derivatives(p: F32, sigma_level_px: float, step: int = 1) -> tuple[F32, ...
     n = slice(2, None, step)  # the one after
     c, n_, s_, w_, e_ = p[i, i], p[o, i], p[n, i], p[i, o], p[i, n]
     s2 = np.float32(sigma_level_px**2)
-    hxx = (e_ - 2.0 * c + w_) * s2
-    hyy = (s_ - 2.0 * c + n_) * s2
+    c2 = 2.0 * c
+    hxx = (e_ - c2 + w_) * s2
+    hyy = (s_ - c2 + n_) * s2
     hxy = 0.25 * (p[n, n] - p[n, o] - p[o, n] + p[o, o]) * s2
     gx = 0.5 * (e_ - w_) * np.float32(sigma_level_px)
     gy = 0.5 * (s_ - n_) * np.float32(sigma_level_px)
@@ -251,7 +252,8 @@ def _eigen(hxx: F32, hyy: F32, hxy: F32) -> tuple[F32, F32, F32, F32]:
     dxy = 0.5 * (hxx - hyy)
     disc = np.sqrt(dxy * dxy + hxy * hxy)
     e_hi, e_lo = half_tr + disc, half_tr - disc  # algebraic: e_hi >= e_lo
-    l2 = np.where(np.abs(e_hi) >= np.abs(e_lo), e_hi, e_lo)
+    l2 = e_lo.copy()
+    _select_into(l2, e_hi, _mask32(np.abs(e_hi) >= np.abs(e_lo)))
     l1 = 2.0 * half_tr - l2
     return dxy, disc, l1, l2
 
@@ -274,25 +276,63 @@ def _ridge_terms(p: F32, sigma_level_px: float) -> tuple[F32, ...]:
     """
     hxx, hyy, hxy, gx, gy = _derivatives(p, sigma_level_px)
     dxy, disc, l1, l2 = _eigen(hxx, hyy, hxy)
-    # Across-vessel direction = eigenvector of e_hi (the dark ridge's l2 > 0).
-    r = np.maximum(disc, np.float32(1e-20))
-    cos2a, sin2a = dxy / r, hxy / r  # angle 2*alpha of the across direction
-    cos_a = np.sqrt(np.clip(0.5 * (1.0 + cos2a), 0.0, 1.0))
-    sin_a = np.sign(sin2a + np.float32(1e-30)) * np.sqrt(np.clip(0.5 * (1.0 - cos2a), 0.0, 1.0))
-    grad_across = np.abs(gx * cos_a + gy * sin_a)
-    pos = l2 > 0
-    l2_safe = np.where(pos, l2, np.float32(1.0))
-    rb2 = (l1 / l2_safe) ** 2
-    rg2 = (grad_across / l2_safe) ** 2
-    blob = np.where(pos, np.exp(-rb2 / (2 * _BETA**2)), 0.0)
-    edge = np.where(pos, np.exp(-rg2 / (2 * _GAMMA**2)), 0.0)
-    dark_blob = np.where(pos, np.clip(l1 / l2_safe, 0.0, 1.0), 0.0)  # 1: l1 = l2 > 0
-    s_norm = np.sqrt(l1 * l1 + l2 * l2)
-    # tangent = across + 90 deg: 2*theta = 2*alpha + 180 deg.
     f32 = np.float32
-    return (blob.astype(f32, copy=False), edge.astype(f32, copy=False),
-            dark_blob.astype(f32, copy=False), s_norm.astype(f32, copy=False),
-            (-cos2a).astype(f32, copy=False), (-sin2a).astype(f32, copy=False))
+    # Across-vessel direction = eigenvector of e_hi (the dark ridge's l2 > 0).
+    r = np.maximum(disc, f32(1e-20))
+    cos2a, sin2a = dxy / r, hxy / r  # angle 2*alpha of the across direction
+    # cos alpha, |sin alpha| = sqrt((1 +- cos 2alpha) / 2); the terms below are computed
+    # in place (the same float32 operations, fewer temporaries)
+    cos_a = np.add(cos2a, f32(1.0))
+    cos_a *= f32(0.5)
+    _clip01(cos_a)
+    np.sqrt(cos_a, out=cos_a)
+    sin_a = np.subtract(f32(1.0), cos2a)
+    sin_a *= f32(0.5)
+    _clip01(sin_a)
+    np.sqrt(sin_a, out=sin_a)
+    sin_a *= np.sign(sin2a + f32(1e-30))
+    grad_across = gx * cos_a
+    grad_across += gy * sin_a
+    np.abs(grad_across, out=grad_across)
+    pos = _mask32(l2 > 0)
+    l2_safe = np.full_like(l2, 1.0)
+    _select_into(l2_safe, l2, pos)  # l2 where l2 > 0, else 1
+    ratio = l1 / l2_safe
+    rb2 = np.square(ratio)
+    rg2 = np.divide(grad_across, l2_safe, out=grad_across)
+    np.square(rg2, out=rg2)
+    blob = _where_pos_exp(pos, rb2, f32(2 * _BETA**2))
+    edge = _where_pos_exp(pos, rg2, f32(2 * _GAMMA**2))
+    dark_blob = _clip01(ratio)
+    _zero_outside(dark_blob, pos)  # 1: l1 = l2 > 0
+    s_norm = np.square(l1)
+    s_norm += np.square(l2)
+    np.sqrt(s_norm, out=s_norm)
+    # tangent = across + 90 deg: 2*theta = 2*alpha + 180 deg.
+    np.negative(cos2a, out=cos2a)
+    np.negative(sin2a, out=sin2a)
+    return blob, edge, dark_blob, s_norm, cos2a, sin2a
+
+
+def _clip01(x: F32) -> F32:
+    """x (float32) clipped to [0, 1] in place."""
+    return np.clip(x, 0.0, 1.0, out=x)
+
+
+def _where_pos_exp(pos: NDArray[np.uint32], sq: F32, two_w2: np.float32) -> F32:
+    """exp(-sq / two_w2) where ``pos`` (:func:`_mask32`), else 0 (float32; ``sq`` is
+    overwritten)."""
+    np.negative(sq, out=sq)
+    sq /= two_w2
+    np.exp(sq, out=sq)
+    return _zero_outside(sq, pos)
+
+
+def _zero_outside(x: F32, mask: NDArray[np.uint32]) -> F32:
+    """x (float32) set to +0 where ``mask`` (:func:`_mask32`) is clear, in place."""
+    v = x.view(np.uint32)
+    np.bitwise_and(v, mask, out=v)
+    return x
 
 
 def _best_over_scales(shape: tuple[int, int], scales: list[tuple[F32, float, float, float]],
@@ -309,24 +349,30 @@ def _best_over_scales(shape: tuple[int, int], scales: list[tuple[F32, float, flo
     out = [np.empty(shape, np.float32) for _ in range(9)]
     for r0 in range(0, shape[0], _STRIP_ROWS):
         r1 = min(r0 + _STRIP_ROWS, shape[0])
-        cur: list[F32] | None = None
-        cur_jb: F32 | None = None
+        dst = [a[r0:r1] for a in out]  # the strip's layers, updated in place
+        first = True
         for p, s_lv, s, c in scales:
             blob, edge, dark_blob, s_norm, c2t, s2t = _ridge_terms(p[r0:r1 + 2], s_lv)
-            strength = blob * edge * s_norm
-            struct = 1.0 - np.exp(-np.minimum(s_norm * np.float32(1.0 / c), 1e3) ** 2 / 2.0)
-            layer = [strength, np.full_like(strength, np.log(s)), blob * struct,
-                     strength * np.float32(1.0 / c), c2t, s2t, blob, s_norm]
-            cur = layer if cur is None else _keep_stronger(cur, layer)
-            jb = (dark_blob * struct).astype(np.float32)
-            cur_jb = jb if cur_jb is None else np.maximum(cur_jb, jb)
+            strength = np.multiply(blob, edge, out=edge)
+            strength *= s_norm
+            # struct = 1 - exp(-min(S / c, 1e3)^2 / 2), in place
+            struct = s_norm * np.float32(1.0 / c)
+            np.minimum(struct, 1e3, out=struct)
+            np.square(struct, out=struct)
+            np.negative(struct, out=struct)
+            struct /= np.float32(2.0)
+            np.exp(struct, out=struct)
+            np.subtract(np.float32(1.0), struct, out=struct)
+            layer = [strength, np.log(s), blob * struct, strength * np.float32(1.0 / c), c2t,
+                     s2t, blob, s_norm]
+            jb = np.multiply(dark_blob, struct, out=dark_blob)
+            _keep_stronger(dst, layer, jb, first)
+            first = False
         if up is not None:
             u = [a[r0:r1] for a in up]
-            cur = u[:8] if cur is None else _keep_stronger(cur, u[:8])
-            cur_jb = u[8] if cur_jb is None else np.maximum(cur_jb, u[8])
-        assert cur is not None and cur_jb is not None
-        for dst, src in zip(out, [*cur, cur_jb], strict=True):
-            dst[r0:r1] = src
+            _keep_stronger(dst, u[:8], u[8], first)
+            first = False
+        assert not first
     return out
 
 
@@ -338,10 +384,36 @@ def _upsample2(arr: F32, shape: tuple[int, int]) -> F32:
                           | cv2.WARP_INVERSE_MAP, borderMode=cv2.BORDER_REPLICATE)
 
 
-def _keep_stronger(a: list[F32], b: list[F32]) -> list[F32]:
-    """Per pixel, the layer (list of (h, w) arrays, strength first) that is stronger."""
-    take_b = b[0] > a[0]
-    return [np.where(take_b, y, x) for x, y in zip(a, b, strict=True)]
+def _keep_stronger(dst: list[F32], layer: list, junction: F32, first: bool) -> None:
+    """Per pixel, the layers ``dst`` (list of (h, w) arrays, strength first; updated in
+    place) or ``layer`` (arrays or scalars) if that is stronger, ties to ``dst``; the
+    junction measure ``dst[8]`` the larger of its own and ``junction``. ``first``:
+    ``dst`` holds nothing yet and takes ``layer``."""
+    if first:
+        for d, y in zip(dst, [*layer, junction], strict=True):
+            d[...] = y
+        return
+    take = _mask32(layer[0] > dst[0])
+    for d, y in zip(dst[:8], layer, strict=True):
+        _select_into(d, np.broadcast_to(np.float32(y), d.shape) if np.ndim(y) == 0 else y,
+                     take)
+    np.maximum(dst[8], junction, out=dst[8])
+
+
+def _mask32(cond: NDArray[np.bool_]) -> NDArray[np.uint32]:
+    """All 32 bits set where ``cond``, none elsewhere (for :func:`_select_into`)."""
+    m = cond.astype(np.uint32)
+    return np.negative(m, out=m)
+
+
+def _select_into(dst: F32, src: F32, mask: NDArray[np.uint32]) -> None:
+    """``dst`` (float32) takes ``src``'s values where ``mask`` (:func:`_mask32`), in place:
+    np.where's result, by bit operations (a data-dependent branch per pixel, as in
+    np.where and np.copyto, is several times slower on a noisy mask)."""
+    d = dst.view(np.uint32)
+    t = np.bitwise_xor(d, src.view(np.uint32))
+    t &= mask
+    d ^= t
 
 
 def _level_for(sigma_px: float) -> int:
@@ -421,19 +493,20 @@ def compute_vesselness(
     s_in = s_norm[valid] if np.any(valid) else s_norm.ravel()
     c_img = max(0.5 * float(s_in.max()) if s_in.size else 0.0, c_floor)
     resp = blob * (1.0 - np.exp(-0.5 * (s_norm * np.float32(1.0 / c_img)) ** 2))
-    resp[~valid] = 0.0
+    in_field = _mask32(valid)
+    _zero_outside(resp, in_field)
     norm = float(np.percentile(resp[valid], 99.9)) if np.any(valid) else 0.0
     resp = np.clip(resp / norm, 0.0, 1.0) if norm > 0 else np.clip(resp, 0.0, 1.0)
-    snr = np.where(valid, snr, 0.0).astype(np.float32)
     direction = (0.5 * np.arctan2(sin2, cos2)) % np.pi
+    # the merged layers are this call's own arrays: masked in place
     return VesselnessMap(
-        response=resp.astype(np.float32),
+        response=resp.astype(np.float32, copy=False),
         scale_px=scale,
         valid=valid,
-        direction_rad=direction.astype(np.float32),
-        strength=snr.astype(np.float32),
-        junction=np.where(valid, merged_jb, 0.0).astype(np.float32),
-        ridge=np.where(valid, np.clip(ridge, 0.0, 1.0), 0.0).astype(np.float32),
+        direction_rad=direction.astype(np.float32, copy=False),
+        strength=_zero_outside(snr, in_field),
+        junction=_zero_outside(merged_jb, in_field),
+        ridge=_zero_outside(_clip01(ridge), in_field),
         sigmas_px=tuple(float(v) for v in sigmas),
         pixel_mm=None if pixel_mm is None else float(pixel_mm),
     )

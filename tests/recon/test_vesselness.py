@@ -82,3 +82,36 @@ def test_a_wide_vessel_answers_at_its_centre_at_fine_pixels() -> None:
     col = vmap.strength[60:141, 160]
     assert abs(60 + int(np.argmax(col)) - 100) <= 0.25 * 17.5  # the fit re-centres
     assert RADIUS_PER_SIGMA * vmap.scale_px[100, 160] == pytest.approx(17.5, rel=0.3)
+
+
+def test_bitwise_selection_is_np_where_to_the_bit() -> None:
+    """The per-pixel selections (recon.vesselness._select_into, _zero_outside) give
+    np.where's float32 bits, signed zeros, infinities and NaN included."""
+    from recon.vesselness import _mask32, _select_into, _zero_outside
+
+    rng = np.random.default_rng(3)
+    special = np.array([0.0, -0.0, np.inf, -np.inf, np.nan, 1e-45, -1.0], np.float32)
+    x = np.concatenate([rng.standard_normal(500).astype(np.float32), special])
+    y = np.concatenate([rng.standard_normal(500).astype(np.float32), special[::-1]])
+    cond = rng.random(x.size) < 0.5
+    got = x.copy()
+    _select_into(got, y, _mask32(cond))
+    assert np.array_equal(got.view(np.uint32), np.where(cond, y, x).view(np.uint32))
+    zeroed = _zero_outside(y.copy(), _mask32(cond))
+    assert np.array_equal(zeroed.view(np.uint32),
+                          np.where(cond, y, np.float32(0.0)).view(np.uint32))
+
+
+def test_the_stronger_layer_wins_and_ties_keep_the_first() -> None:
+    from recon.vesselness import _keep_stronger
+
+    first = [np.array([1.0, 2.0, 3.0], np.float32) for _ in range(9)]
+    dst = [np.empty(3, np.float32) for _ in range(9)]
+    _keep_stronger(dst, first[:8], first[8], True)
+    strength = np.array([0.5, 2.0, 4.0], np.float32)  # weaker, tied, stronger
+    other = [strength, 7.0, *(np.full(3, 9.0, np.float32) for _ in range(6))]
+    _keep_stronger(dst, other, np.array([0.0, 5.0, 1.0], np.float32), False)
+    assert dst[0].tolist() == [1.0, 2.0, 4.0]
+    assert dst[1].tolist() == [1.0, 2.0, 7.0]  # a scalar layer (the scale) broadcast
+    assert all(d.tolist() == [1.0, 2.0, 9.0] for d in dst[2:8])
+    assert dst[8].tolist() == [1.0, 5.0, 3.0]  # the junction measure: the larger
