@@ -259,22 +259,31 @@ def point_polyline_distance(
         return np.linalg.norm(P - L[0], axis=1)
     a, seg = L[:-1], np.diff(L, axis=0)  # (M-1, D)
     seg_len2 = np.maximum(np.einsum("md,md->m", seg, seg), 1e-24)
+    sq_distance = _sq_distance_2d if P.shape[1] == 2 else _sq_distance_nd
     out = np.empty(len(P))
-    if P.shape[1] == 2:  # image points: the same sums per coordinate, without (n, M-1, 2)
-        for start in range(0, len(P), chunk):  # temporaries (einsum's bits for D = 2)
-            p = P[start : start + chunk]
-            wx, wy = p[:, None, 0] - a[None, :, 0], p[:, None, 1] - a[None, :, 1]
-            u = np.clip((wx * seg[:, 0] + wy * seg[:, 1]) / seg_len2, 0.0, 1.0)
-            dx, dy = wx - u * seg[:, 0], wy - u * seg[:, 1]
-            out[start : start + chunk] = np.sqrt((dx * dx + dy * dy).min(axis=1))
-        return out
     for start in range(0, len(P), chunk):
-        p = P[start : start + chunk]
-        w = p[:, None, :] - a[None, :, :]  # (n, M-1, D)
-        u = np.clip(np.einsum("nmd,md->nm", w, seg) / seg_len2, 0.0, 1.0)
-        diff = w - u[..., None] * seg[None]
-        out[start : start + chunk] = np.sqrt(np.einsum("nmd,nmd->nm", diff, diff).min(axis=1))
+        out[start : start + chunk] = np.sqrt(
+            sq_distance(P[start : start + chunk], a, seg, seg_len2).min(axis=1))
     return out
+
+
+def _sq_distance_nd(p: FloatArray, a: FloatArray, seg: FloatArray,
+                    seg_len2: FloatArray) -> FloatArray:
+    """Squared distances (n, M-1) of points p (n, D) to the segments a + t seg (M-1, D)."""
+    w = p[:, None, :] - a[None, :, :]  # (n, M-1, D)
+    u = np.clip(np.einsum("nmd,md->nm", w, seg) / seg_len2, 0.0, 1.0)
+    diff = w - u[..., None] * seg[None]
+    return np.einsum("nmd,nmd->nm", diff, diff)
+
+
+def _sq_distance_2d(p: FloatArray, a: FloatArray, seg: FloatArray,
+                    seg_len2: FloatArray) -> FloatArray:
+    """:func:`_sq_distance_nd` for image points (D = 2): the same sums per coordinate
+    (einsum's bits for two terms) without (n, M-1, 2) temporaries."""
+    wx, wy = p[:, None, 0] - a[None, :, 0], p[:, None, 1] - a[None, :, 1]
+    u = np.clip((wx * seg[:, 0] + wy * seg[:, 1]) / seg_len2, 0.0, 1.0)
+    dx, dy = wx - u * seg[:, 0], wy - u * seg[:, 1]
+    return dx * dx + dy * dy
 
 
 def _error_stats(dist_px: FloatArray, pixel_mm: float) -> dict:
