@@ -148,19 +148,19 @@ class _Graph:
         terms = (cost_px + across, -across * np.cos(2 * direction),
                  -across * np.sin(2 * direction))
         lengths = (int(move_px),) if move_px <= 3 else (int(move_px), int(move_px) - 1)
-        # Edges (p, k - dk) -> (q, k), dk in (-1, 0, 1), straight in the order of scipy's
-        # COO-to-CSR conversion: by end node (q, k), an order fixed per heading k - dk.
+        # Edges (p, k - dk) -> (q, k), dk in -1, 0, 1, in scipy's COO-to-CSR order (by end
+        # node, fixed per heading: _edge_slots), written (slot, pixel), read transposed.
         slots = _edge_slots(lengths)  # (C, 16)
         m, width = n * N_HEADINGS, slots.size // N_HEADINGS
-        dst, ok_all, wt = (np.empty((n, N_HEADINGS * width), dtype=t) for t in (int, bool, float))
+        dst, ok_all, wt = (np.empty((N_HEADINGS * width, n), dtype=t) for t in (int, bool, float))
         for i, length_px in enumerate(lengths):
-            q, ok, move = self._moves(length_px, terms, log_scale)
+            q, ok, move = (a.T.copy() for a in self._moves(length_px, terms, log_scale))
             for dk in (-1, 0, 1):
                 k, at = (np.arange(N_HEADINGS) + dk) % N_HEADINGS, slots[3 * i + 1 + dk]
-                dst[:, at], ok_all[:, at] = q[:, k] * N_HEADINGS + k, ok[:, k]
-                wt[:, at] = move[:, k] + turn[:, None] * abs(dk)
-        indptr = np.concatenate([[0], np.cumsum(ok_all.reshape(m, width).sum(axis=1))])
-        indices, data = dst[ok_all], wt[ok_all]
+                dst[at], ok_all[at] = q[k] * N_HEADINGS + k[:, None], ok[k]
+                wt[at] = move[k] + turn * abs(dk)
+        indptr = np.concatenate([[0], np.cumsum(ok_all.reshape(N_HEADINGS, width, n).sum(1).T)])
+        indices, data = dst.T[ok_all.T], wt.T[ok_all.T]
         self.graph = csr_matrix((data, indices, indptr), shape=(m, m))
         self.cost_px = cost_px
 
