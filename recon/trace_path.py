@@ -107,6 +107,16 @@ def _headings(move_px: int) -> tuple[IntArray, FloatArray]:
     return d, np.arctan2(d[:, 1], d[:, 0]).astype(float)
 
 
+def _edge_slots(lengths: tuple[int, ...]) -> IntArray:
+    """Slot (C, 16) j C + rank of the edge (length, dk) (C = lengths x dk) of a node (p, j):
+    ranked by end node (q, k), i.e. by offset (drow, dcol) in row-major order, then k."""
+    k = (np.arange(N_HEADINGS)[:, None] + np.arange(-1, 2)) % N_HEADINGS  # (16, 3)
+    d = np.concatenate([_headings(n)[0][k] for n in lengths], axis=1)  # (16, C, 2)
+    key = 10_000 * d[..., 1] + 100 * d[..., 0] + np.tile(k, len(lengths))  # (16, C)
+    assert np.all(np.diff(np.sort(key, axis=1), axis=1)), "COO would sum duplicate edges"
+    return np.argsort(np.argsort(key, axis=1), axis=1).T + key.shape[1] * np.arange(N_HEADINGS)
+
+
 def _crop_box(clicks_px: FloatArray, shape: tuple[int, int], radius_px: float) -> tuple[int, ...]:
     h, w = shape
     lo, hi = clicks_px.min(axis=0), clicks_px.max(axis=0)
@@ -130,7 +140,6 @@ class _Graph:
         self.index[self.rows, self.cols] = np.arange(n)
         cost_px = ((1.0 + _EPS) / (_EPS + resp)) ** 2  # (h, w), 1 on a full-strength ridge
         turn = _TURN * (1.0 + _JUNCTION_TURN * junction[self.rows, self.cols])  # (n,)
-        src, dst, wt = [], [], []
         # For L = 4 two move lengths, 4 and 3: integer moves of length 4 alone change
         # the row by 0, 2, 3 or 4 only, and miss pixels of a narrow band (L <= 3 reach
         # all). Their offsets differ, so every (node, node) pair has one edge.
@@ -138,17 +147,21 @@ class _Graph:
         across = _ACROSS * resp * cost_px / 2.0
         terms = (cost_px + across, -across * np.cos(2 * direction),
                  -across * np.sin(2 * direction))
-        for length_px in ((int(move_px),) if move_px <= 3 else (int(move_px), int(move_px) - 1)):
-            q, ok, move = self._moves(length_px, terms, log_scale)
-            pi, ki = np.nonzero(ok)
-            qi, mv, tn = q[pi, ki], move[pi, ki], turn[pi]
-            for dk in (-1, 0, 1):  # edges (p, k - dk) -> (q, k)
-                src.append(pi * N_HEADINGS + (ki - dk) % N_HEADINGS)
-                dst.append(qi * N_HEADINGS + ki)
-                wt.append(mv + tn * abs(dk))
-        m = n * N_HEADINGS
-        self.graph = csr_matrix(
-            (np.concatenate(wt), (np.concatenate(src), np.concatenate(dst))), shape=(m, m))
+        lengths = (int(move_px),) if move_px <= 3 else (int(move_px), int(move_px) - 1)
+        # Edges (p, k - dk) -> (q, k), dk in -1, 0, 1, in scipy's COO-to-CSR order (by end
+        # node, fixed per heading: _edge_slots), written (slot, pixel), read transposed.
+        slots = _edge_slots(lengths)  # (C, 16)
+        m, width = n * N_HEADINGS, slots.size // N_HEADINGS
+        dst, ok_all, wt = (np.empty((N_HEADINGS * width, n), dtype=t) for t in (int, bool, float))
+        for i, length_px in enumerate(lengths):
+            q, ok, move = (a.T.copy() for a in self._moves(length_px, terms, log_scale))
+            for dk in (-1, 0, 1):
+                k, at = (np.arange(N_HEADINGS) + dk) % N_HEADINGS, slots[3 * i + 1 + dk]
+                dst[at], ok_all[at] = q[k] * N_HEADINGS + k[:, None], ok[k]
+                wt[at] = move[k] + turn * abs(dk)
+        indptr = np.concatenate([[0], np.cumsum(ok_all.reshape(N_HEADINGS, width, n).sum(1).T)])
+        indices, data = dst.T[ok_all.T], wt.T[ok_all.T]
+        self.graph = csr_matrix((data, indices, indptr), shape=(m, m))
         self.cost_px = cost_px
 
     def _moves(self, length_px: int, terms: tuple[FloatArray, FloatArray, FloatArray],
@@ -326,7 +339,8 @@ def _route_on(graph: _Graph, local: FloatArray, rc: list[tuple[int, int]], move_
 
 
 def loop_apices(band: NDArray[np.bool_], path_px: FloatArray, radius_px: float,
-                lumen_px: FloatArray | None = None) -> list[tuple[int, FloatArray]]:
+                lumen_px: FloatArray | None = None, *,
+                route_dist_px: FloatArray | None = None) -> list[tuple[int, FloatArray]]:
     """Loops of the vessel that a route (M, 2) cut across, in a band's pixels (col, row).
 
     A loop that overlaps itself in projection is a ring of ridge touching the route
@@ -341,15 +355,11 @@ def loop_apices(band: NDArray[np.bool_], path_px: FloatArray, radius_px: float,
     route leaves two pieces that meet it once each; two branches that meet make
     a ring of thinner vessels.)
 
+    ``route_dist_px``: :func:`route_distance` of the route, if already computed.
     Returns (route index of the crossing, the loop's apex (2,): the middle of that
     skeleton path), in route order.
     """
-    h, w = band.shape
-    on_route = np.zeros((h, w), dtype=bool)
-    rc = np.rint(path_px[:, ::-1]).astype(int)
-    inside = (rc[:, 0] >= 0) & (rc[:, 0] < h) & (rc[:, 1] >= 0) & (rc[:, 1] < w)
-    on_route[rc[inside, 0], rc[inside, 1]] = True
-    dist = ndi.distance_transform_edt(~on_route)
+    dist = route_distance(band.shape, path_px) if route_dist_px is None else route_dist_px
     tube_px = 2.5 * radius_px + 3.0
     pieces = skeletonize(band) & (dist > tube_px)
     labels, n = ndi.label(pieces, structure=np.ones((3, 3)))
@@ -389,6 +399,15 @@ def loop_apices(band: NDArray[np.bool_], path_px: FloatArray, radius_px: float,
     return sorted(found, key=lambda item: item[0])
 
 
+def route_distance(shape: tuple[int, int], path_px: FloatArray) -> FloatArray:
+    """Euclidean distance (px) of each pixel of a (H, W) grid to a route (M, 2) (col, row)."""
+    rc = np.rint(path_px[:, ::-1]).astype(int)
+    rc = rc[np.all((rc >= 0) & (rc < shape), axis=1)]
+    off_route = np.ones(shape, dtype=bool)
+    off_route[rc[:, 0], rc[:, 1]] = False
+    return ndi.distance_transform_edt(off_route)
+
+
 def ring_circuits(band: NDArray[np.bool_], path_px: FloatArray,
                   radius_px: float) -> list[tuple[int, FloatArray]]:
     """Tight loops that a route (M, 2) cut across, found as holes of a band (col, row).
@@ -414,7 +433,10 @@ def ring_circuits(band: NDArray[np.bool_], path_px: FloatArray,
     if n == 0:
         return []
     areas = np.bincount(labels.ravel())
-    inscribed = ndi.maximum(ndi.distance_transform_edt(holes), labels, np.arange(n + 1))
+    rr, cc = np.nonzero(holes)  # their box + 1 px holds their nearest non-hole pixels
+    r0, c0, inscribed = rr.min() - 1, cc.min() - 1, np.zeros(n + 1)
+    d_in = ndi.distance_transform_edt(holes[r0 : rr.max() + 2, c0 : cc.max() + 2])
+    np.maximum.at(inscribed, labels[rr, cc], d_in[rr - r0, cc - c0])
     s_route = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(path_px, axis=0),
                                                               axis=1))])
     step = float(np.median(np.diff(s_route))) if len(s_route) > 1 else 1.0
@@ -487,8 +509,10 @@ def _round_loops(route: Route, graph: _Graph, rings: list[NDArray[np.bool_]],
     the route at its crossing (:func:`_spliced`).
     """
     o = np.asarray(origin, float)
+    route_dist = route_distance(rings[0].shape, route.path_px - o)
     for ring_band in rings:
-        loops = loop_apices(ring_band, route.path_px - o, radius_px, lumen_px)
+        loops = loop_apices(ring_band, route.path_px - o, radius_px, lumen_px,
+                            route_dist_px=route_dist)
         if loops:
             break
     else:

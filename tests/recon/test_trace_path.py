@@ -7,11 +7,19 @@ import pickle
 import numpy as np
 import pytest
 from scipy import ndimage as ndi
+from scipy.sparse import csr_matrix
 from scipy.spatial import cKDTree
 from test_intensity import path_length, xray
 
 from recon.centerline import TraceError, trace_segment
-from recon.trace_path import find_route_problem, ring_circuits
+from recon.trace_path import (
+    N_HEADINGS,
+    _edge_slots,
+    _Graph,
+    find_route_problem,
+    ring_circuits,
+    route_distance,
+)
 
 
 def segment(p, q, n=3000):
@@ -144,3 +152,56 @@ def test_ring_circuits_goes_round_a_ring_below_a_crossing() -> None:
     radius = np.hypot(circuit[:, 0] - 60.0, circuit[:, 1] - 33.0)
     assert np.all(np.abs(radius - 8.0) < 1.5)  # the ring's centre line
     assert circuit[1, 0] - circuit[0, 0] > 0  # heading +col, as the route does
+
+
+@pytest.mark.parametrize("move_px", [2, 3, 4])
+def test_the_graph_is_built_in_csr_order_as_from_its_edge_list(move_px: int) -> None:
+    """The (pixel, heading) graph assembled straight in CSR order equals the matrix that
+    scipy makes from its edge list (edges (p, k - dk) -> (q, k), dk in -1, 0, 1): the
+    same rows, column order and weights (Dijkstra's ties depend on the order)."""
+    rng = np.random.default_rng(3)
+    rr, cc = np.mgrid[0:40, 0:50].astype(float)
+    band = (np.abs(np.hypot(rr - 20, cc - 25) - 12) <= 3) | (np.abs(rr - 8) <= 2)
+    band &= rng.random(band.shape) > 0.05  # holes and loose pixels
+    resp, scale = rng.random(band.shape), rng.uniform(1.0, 3.0, band.shape)
+    direction, junction = rng.uniform(-np.pi, np.pi, band.shape), rng.random(band.shape)
+    graph = _Graph(band, resp, np.log(scale), direction, move_px, junction)
+    cost = ((1.05) / (0.05 + resp)) ** 2
+    across = 2.0 * resp * cost / 2.0
+    terms = (cost + across, -across * np.cos(2 * direction), -across * np.sin(2 * direction))
+    turn = 0.3 * (1.0 + 30.0 * junction[graph.rows, graph.cols])
+    src, dst, wt = [], [], []
+    for length_px in (move_px,) if move_px <= 3 else (move_px, move_px - 1):
+        q, ok, move = graph._moves(length_px, terms, np.log(scale))
+        pi, ki = np.nonzero(ok)
+        for dk in (-1, 0, 1):
+            src.append(pi * N_HEADINGS + (ki - dk) % N_HEADINGS)
+            dst.append(q[pi, ki] * N_HEADINGS + ki)
+            wt.append(move[pi, ki] + turn[pi] * abs(dk))
+    m = len(graph.rows) * N_HEADINGS
+    ref = csr_matrix((np.concatenate(wt), (np.concatenate(src), np.concatenate(dst))),
+                     shape=(m, m))
+    assert graph.graph.nnz == ref.nnz > 0
+    for field in ("indptr", "indices", "data"):
+        assert np.array_equal(getattr(graph.graph, field), getattr(ref, field))
+
+
+@pytest.mark.parametrize("lengths", [(2,), (3,), (4, 3)])
+def test_edge_slots_give_each_node_its_own_slots(lengths: tuple[int, ...]) -> None:
+    slots = _edge_slots(lengths)
+    n_cand = 3 * len(lengths)
+    assert slots.shape == (n_cand, N_HEADINGS)
+    for j in range(N_HEADINGS):
+        assert sorted(slots[:, j]) == list(range(j * n_cand, (j + 1) * n_cand))
+
+
+def test_route_distance_is_the_distance_to_the_nearest_route_pixel() -> None:
+    t = np.linspace(0.0, 1.0, 200)
+    route = np.column_stack([-5.0 + 50.0 * t, 10.0 + 12.0 * np.sin(6.0 * t)])  # leaves the grid
+    dist = route_distance((30, 40), route)
+    pixels = np.unique(np.rint(route[:, ::-1]).astype(int), axis=0)
+    pixels = pixels[(pixels[:, 0] >= 0) & (pixels[:, 0] < 30) & (pixels[:, 1] >= 0)
+                    & (pixels[:, 1] < 40)]
+    rr, cc = np.mgrid[0:30, 0:40]
+    brute = np.min(np.hypot(rr[..., None] - pixels[:, 0], cc[..., None] - pixels[:, 1]), axis=2)
+    assert np.array_equal(dist, brute)
