@@ -414,10 +414,12 @@ def draw_reconstruction(
     scene.add_line_segments("/model/centerline", polyline_segments(X_scene).astype(
         np.float32), (40, 40, 40), thickness=1.5, thickness_units="screen")
     m = rec.measurements
-    # Centred over the model: the notifications (top left) would cover a left-aligned title.
+    # Centred over the model (the notifications, top left, would cover a left-aligned
+    # title), a line above its box (the model's top end reaches the box's edge).
     scene.add_label("/model/title", f"3D model, {m.segment_length_mm:.1f} mm; drag to rotate\n"
                     "green = reference diameter, red = half of it",
-                    position=(model_position[0], model_position[1] - MODEL_SIZE / 2, 0.0),
+                    position=(model_position[0], model_position[1] - MODEL_SIZE / 2 - 0.04,
+                              0.0),
                     anchor="top-center")
     centre = model_position + np.array([0.0, 0.0, scale * (hi[2] - lo[2]) / 2])
     model = ModelNodes(root=root, position=centre, T_scene_from_world=T)
