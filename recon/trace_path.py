@@ -50,7 +50,7 @@ from recon.trace_error import TraceError
 from recon.vesselness import RADIUS_PER_SIGMA, VesselnessMap
 
 __all__ = ["Route", "minimal_route", "loop_apices", "ring_circuits", "RouteProblem",
-           "find_route_problem", "N_HEADINGS"]
+           "find_route_problem", "route_distance", "N_HEADINGS"]
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
