@@ -210,9 +210,12 @@ class ViewerApp:
         self.notifications.append((level, title, body))
         color = {"error": "red", "warning": "yellow", "info": "blue", "success": "green"}[level]
         clients = [client] if client is not None else list(self.server.get_clients().values())
+        # Information and success notes go sooner (they stack over view A's title);
+        # warnings and errors stay longer, to be read.
+        seconds = 8.0 if level in ("error", "warning") else 4.0
         for c in clients:
             try:
-                c.add_notification(title, body, color=color, auto_close_seconds=8.0)
+                c.add_notification(title, body, color=color, auto_close_seconds=seconds)
             except Exception:  # a client that went away must not break the app
                 log.debug("notification to a closed client", exc_info=True)
 
