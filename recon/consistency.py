@@ -42,6 +42,7 @@ from numpy.typing import NDArray
 from scipy import ndimage as ndi
 
 from recon.geometry import ViewGeometry
+from recon.triangulation import segment_feet_2d
 from recon.types import Centerline2D, Centerline3D, arclength
 
 __all__ = [
@@ -274,16 +275,10 @@ def nearest_on_polyline(
     dist = np.empty(len(p))
     pos = np.empty(len(p))
     for lo in range(0, len(p), chunk):
-        pc = p[lo:lo + chunk, None, :]  # (C, 1, 2)
-        t = np.clip(np.einsum("csk,sk->cs", pc - a[None], d) / dd[None], 0.0, 1.0)
-        # |pc - foot| with foot = a + t d, written per coordinate: np.linalg.norm's bits
-        # without its reduction over an axis of two
-        dx = pc[..., 0] - (a[None, :, 0] + t * d[None, :, 0])
-        dy = pc[..., 1] - (a[None, :, 1] + t * d[None, :, 1])
-        r = np.sqrt(dx * dx + dy * dy)
-        k = np.argmin(r, axis=1)
+        t, d2 = segment_feet_2d(p[lo:lo + chunk], a, d, dd)  # (C, S) each
+        k = np.argmin(d2, axis=1)
         rows = np.arange(len(k))
-        dist[lo:lo + chunk] = r[rows, k]
+        dist[lo:lo + chunk] = np.sqrt(d2[rows, k])
         pos[lo:lo + chunk] = s[k] + t[rows, k] * np.sqrt(dd[k])
     return dist, pos
 

@@ -37,6 +37,7 @@ __all__ = [
     "epipolar_weights",
     "radius_mm_eq11",
     "point_polyline_distance",
+    "segment_feet_2d",
     "table3_metrics",
 ]
 
@@ -278,12 +279,19 @@ def _sq_distance_nd(p: FloatArray, a: FloatArray, seg: FloatArray,
 
 def _sq_distance_2d(p: FloatArray, a: FloatArray, seg: FloatArray,
                     seg_len2: FloatArray) -> FloatArray:
-    """:func:`_sq_distance_nd` for image points (D = 2): the same sums per coordinate
-    (einsum's bits for two terms) without (n, M-1, 2) temporaries."""
+    """:func:`_sq_distance_nd` for image points (D = 2), by :func:`segment_feet_2d`."""
+    return segment_feet_2d(p, a, seg, seg_len2)[1]
+
+
+def segment_feet_2d(p: FloatArray, a: FloatArray, seg: FloatArray,
+                    seg_len2: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Feet of image points p (n, 2) on the segments a + u seg (S, 2), u in [0, 1]:
+    u (n, S) and the squared distances (n, S); ``seg_len2`` (S,) is |seg|^2. The sums
+    are per coordinate (einsum's bits for two terms) without (n, S, 2) temporaries."""
     wx, wy = p[:, None, 0] - a[None, :, 0], p[:, None, 1] - a[None, :, 1]
     u = np.clip((wx * seg[:, 0] + wy * seg[:, 1]) / seg_len2, 0.0, 1.0)
     dx, dy = wx - u * seg[:, 0], wy - u * seg[:, 1]
-    return dx * dx + dy * dy
+    return u, dx * dx + dy * dy
 
 
 def _error_stats(dist_px: FloatArray, pixel_mm: float) -> dict:
