@@ -48,7 +48,11 @@ def loop_apices(band: NDArray[np.bool_], path_px: FloatArray, radius_px: float,
     """
     dist = route_distance(band.shape, path_px) if route_dist_px is None else route_dist_px
     tube_px = 2.5 * radius_px + 3.0
-    pieces = skeletonize(band) & (dist > tube_px)
+    pieces = np.zeros(band.shape, dtype=bool)  # the skeleton (a local thinning) on the band's box
+    if np.any(band):
+        box = _box(band, 1)
+        pieces[box] = skeletonize(band[box])
+    pieces &= dist > tube_px
     labels, n = ndi.label(pieces, structure=np.ones((3, 3)))
     if n == 0:
         return []
@@ -114,8 +118,14 @@ def ring_circuits(band: NDArray[np.bool_], path_px: FloatArray,
     circuit from and back to its point nearest the crossing, heading the way the
     route heads there), in route order.
     """
-    band = ndi.binary_closing(band)  # a ring broken by one pixel still encloses its hole
-    holes = ndi.binary_fill_holes(band) & ~band
+    if not np.any(band):
+        return []
+    # On the band's box grown by 3 px, the same as on the whole grid: the closing reaches
+    # 2 px out, and the box's empty rim joins every outside pixel to the grid's edge.
+    box, sub = _box(band, 3), np.zeros_like(band)
+    sub[box] = ndi.binary_closing(band[box])  # a ring broken by one pixel still encloses its hole
+    band, holes = sub, np.zeros_like(band)
+    holes[box] = ndi.binary_fill_holes(band[box]) & ~band[box]
     labels, n = ndi.label(holes)
     if n == 0:
         return []
@@ -155,6 +165,14 @@ def ring_circuits(band: NDArray[np.bool_], path_px: FloatArray,
             circuit = np.roll(circuit[::-1], 1, axis=0)
         found.append((i, np.vstack([circuit, circuit[:1]])))
     return sorted(found, key=lambda item: item[0])
+
+
+def _box(mask: NDArray[np.bool_], pad_px: int) -> tuple[slice, slice]:
+    """(rows, cols) slices of the box round a non-empty mask's pixels, grown by ``pad_px``
+    and clipped to the grid."""
+    (r0, r1), (c0, c1) = (np.flatnonzero(np.any(mask, axis=a))[[0, -1]] for a in (1, 0))
+    return (slice(max(r0 - pad_px, 0), r1 + pad_px + 1),
+            slice(max(c0 - pad_px, 0), c1 + pad_px + 1))
 
 
 def _contact_path(rows: IntArray, cols: IntArray, touch: NDArray[np.bool_]) -> IntArray | None:
