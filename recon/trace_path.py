@@ -163,6 +163,8 @@ class _Graph:
         indices, data = dst.T[ok_all.T], wt.T[ok_all.T]
         self.graph = csr_matrix((data, indices, indptr), shape=(m, m))
         self.cost_px = cost_px
+        # the shortest-path tree of the last search from all of a pixel's headings
+        self._last_tree: tuple[tuple[int, bytes], tuple[FloatArray, IntArray]] | None = None
 
     def _moves(self, length_px: int, terms: tuple[FloatArray, FloatArray, FloatArray],
                log_scale: FloatArray):
@@ -203,8 +205,14 @@ class _Graph:
         within ``reach_px`` of the end; (None, nearest reached band pixel) if none."""
         p0 = self.index[start_rc]
         sources = p0 * N_HEADINGS + headings
-        dist, pred, _ = dijkstra(self.graph, directed=True, indices=sources, min_only=True,
-                                 return_predecessors=True)
+        key = (int(p0), np.asarray(headings).tobytes())
+        if self._last_tree is not None and self._last_tree[0] == key:
+            dist, pred = self._last_tree[1]  # a route through apices starts where one did
+        else:
+            dist, pred, _ = dijkstra(self.graph, directed=True, indices=sources, min_only=True,
+                                     return_predecessors=True)
+            if len(headings) == N_HEADINGS:
+                self._last_tree = (key, (dist, pred))
         per_pixel = dist.reshape(-1, N_HEADINGS)
         d_end = np.hypot(self.rows - end_rc[0], self.cols - end_rc[1])
         near = d_end <= reach_px
