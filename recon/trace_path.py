@@ -138,7 +138,13 @@ class _Graph:
         n = len(self.rows)
         self.index = np.full((h, w), -1, dtype=np.int64)
         self.index[self.rows, self.cols] = np.arange(n)
-        cost_px = ((1.0 + _EPS) / (_EPS + resp)) ** 2  # (h, w), 1 on a full-strength ridge
+        # The pixel maps on the band's bounding box only: a move that stays on the band
+        # samples only pixels between its ends (:meth:`_moves`).
+        self.box = (int(self.rows.min()), int(self.rows.max()) + 1,
+                    int(self.cols.min()), int(self.cols.max()) + 1)
+        in_box = (slice(self.box[0], self.box[1]), slice(self.box[2], self.box[3]))
+        resp, direction = resp[in_box], direction[in_box]
+        cost_px = ((1.0 + _EPS) / (_EPS + resp)) ** 2  # (box), 1 on a full-strength ridge
         turn = _TURN * (1.0 + _JUNCTION_TURN * junction[self.rows, self.cols])  # (n,)
         # For L = 4 two move lengths, 4 and 3: integer moves of length 4 alone change
         # the row by 0, 2, 3 or 4 only, and miss pixels of a narrow band (L <= 3 reach
@@ -162,7 +168,7 @@ class _Graph:
         indptr = np.concatenate([[0], np.cumsum(ok_all.reshape(N_HEADINGS, width, n).sum(1).T)])
         indices, data = dst.T[ok_all.T], wt.T[ok_all.T]
         self.graph = csr_matrix((data, indices, indptr), shape=(m, m))
-        self.cost_px = cost_px
+        self.cost_px = cost_px[self.rows - self.box[0], self.cols - self.box[2]]  # (n,)
         # the shortest-path tree of the last search from all of a pixel's headings
         self._last_tree: tuple[tuple[int, bytes], tuple[FloatArray, IntArray]] | None = None
 
@@ -172,10 +178,12 @@ class _Graph:
         (-1 off the band), whether it stays on the band, and its cost (n, 16).
 
         The pixel cost w (1 + a V sin^2(heading - direction)) is A + B cos 2h + D sin 2h
-        with per-pixel maps ``terms`` = (A, B, D); it is averaged at the move's
-        middle and end.
+        with per-pixel maps ``terms`` = (A, B, D) on the band's box; it is averaged at
+        the move's middle and end (rounded, they lie between its ends: inside the box
+        for a move that stays on the band; the others' costs are not used).
         """
         h, w = self.shape
+        r_lo, r_hi, c_lo, c_hi = self.box
         d, theta = _headings(length_px)
         qc = self.cols[:, None] + d[None, :, 0]  # (n, 16)
         qr = self.rows[:, None] + d[None, :, 1]
@@ -184,9 +192,9 @@ class _Graph:
         ok = q >= 0
         flat = []
         for t in (0.5, 1.0):
-            sc = np.clip(np.rint(self.cols[:, None] + t * d[None, :, 0]), 0, w - 1)
-            sr = np.clip(np.rint(self.rows[:, None] + t * d[None, :, 1]), 0, h - 1)
-            flat.append((sr * w + sc).astype(np.int64))  # (n, 16)
+            sc = np.clip(np.rint(self.cols[:, None] + t * d[None, :, 0]), c_lo, c_hi - 1)
+            sr = np.clip(np.rint(self.rows[:, None] + t * d[None, :, 1]), r_lo, r_hi - 1)
+            flat.append(((sr - r_lo) * (c_hi - c_lo) + sc - c_lo).astype(np.int64))  # (n, 16)
         a_map, b_map, d_map = (m.ravel() for m in terms)
         mean = [0.5 * (m[flat[0]] + m[flat[1]]) for m in (a_map, b_map, d_map)]
         per_px = mean[0] + np.cos(2 * theta)[None] * mean[1] + np.sin(2 * theta)[None] * mean[2]
@@ -220,7 +228,7 @@ class _Graph:
         if not np.any(finite[near]):
             reached = np.nonzero(finite.any(axis=1))[0]
             return None, int(reached[np.argmin(d_end[reached])]) if len(reached) else int(p0)
-        total = per_pixel + (d_end * self.cost_px[self.rows, self.cols])[:, None]
+        total = per_pixel + (d_end * self.cost_px)[:, None]
         total = np.where(near[:, None] & finite, total, np.inf)
         node = int(np.argmin(total))
         chain = [node]
