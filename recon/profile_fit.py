@@ -111,9 +111,18 @@ def _template(half_width_px: float, sigma_px: float, r_max: float,
     """Chords of :func:`_chords` convolved with a Gaussian of ``sigma_px`` (floored at
     half the fine step) and sampled at the window's offsets: (R, L), by quadrature
     (one matrix product)."""
-    _, fine, chord, fine_step = _chords(r_max, r_step)
-    return _blurred(chord, fine, _offsets_for(half_width_px),
-                    max(sigma_px, 0.5 * fine_step), fine_step)
+    chord, fine_step = _chords(r_max, r_step)[2:]
+    return chord @ _window_weights(half_width_px, max(sigma_px, 0.5 * fine_step), r_max, r_step)
+
+
+@lru_cache(maxsize=4)
+def _window_weights(half_width_px: float, sigma_px: float, r_max: float,
+                    r_step: float) -> FloatArray:
+    """The quadrature weights (F, L) of :func:`_gaussian_weights` on the grid of
+    :func:`_chords` at the window's offsets (a template and its chord variance at one
+    blur share them)."""
+    _, fine, _, fine_step = _chords(r_max, r_step)
+    return _gaussian_weights(fine, _offsets_for(half_width_px), sigma_px, fine_step)
 
 
 @lru_cache(maxsize=64)
@@ -152,13 +161,6 @@ def profile_table(
     return offsets, radii, design_flat, pinv.reshape(3 * n_r, n_l).T.copy()
 
 
-def _blurred(chord: FloatArray, fine: FloatArray, offsets: FloatArray, sigma_px: float,
-             fine_step: float) -> FloatArray:
-    """Chords (R, F) on the fine grid ``fine`` (F,) convolved with a Gaussian of
-    ``sigma_px`` and sampled at ``offsets`` (L,): (R, L), by quadrature."""
-    return chord @ _gaussian_weights(fine, offsets, sigma_px, fine_step)
-
-
 def _gaussian_weights(fine: FloatArray, offsets: FloatArray, sigma_px: float,
                       fine_step: float) -> FloatArray:
     """Quadrature weights (F, L) of a Gaussian of ``sigma_px`` centred at each offset,
@@ -169,14 +171,14 @@ def _gaussian_weights(fine: FloatArray, offsets: FloatArray, sigma_px: float,
     return kernel * (fine_step / (np.sqrt(2.0 * np.pi) * sigma_px))
 
 
-@lru_cache(maxsize=64)
+@lru_cache(maxsize=256)
 def _chord_variance(half_width_px: float, blur_px: float, r_max: float,
                     r_step: float) -> FloatArray:
-    """V = G * C^2 - (G * C)^2 (R, L) of :func:`_blur_variance_table` (no enhancement in it)."""
-    _, fine, chord, fine_step = _chords(r_max, r_step)
-    kernel = _gaussian_weights(fine, _offsets_for(half_width_px),
-                               max(blur_px, 0.5 * fine_step), fine_step)
-    mean = chord @ kernel
+    """V = G * C^2 - (G * C)^2 (R, L) of :func:`_blur_variance_table` (no enhancement in
+    it; G * C is the template of :func:`_template`)."""
+    chord, fine_step = _chords(r_max, r_step)[2:]
+    kernel = _window_weights(half_width_px, max(blur_px, 0.5 * fine_step), r_max, r_step)
+    mean = _template(half_width_px, blur_px, r_max, r_step)
     return np.maximum((chord**2) @ kernel - mean**2, 0.0)
 
 
