@@ -26,6 +26,8 @@ Pixels are (col, row), 0-based; images are MONOCHROME2 (vessels dark).
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import ndimage as ndi
@@ -47,6 +49,7 @@ from recon.intensity import (
 )
 from recon.profile_fit import (
     MIN_MAX_SHIFT_PX,
+    SampledProfiles,
     fit_along,
     half_width_for,
     sample_along,
@@ -296,14 +299,18 @@ def _power_rss(raw_coef: FloatArray, points_px: FloatArray, normals: FloatArray,
     g = geometric_mean(sample_profiles(raw_coef, points_px, normals, reach, 3), scale)
     samples = sample_along(raw_coef, points_px, normals, radius_px, search_shift=search_shift,
                            order=3)  # the same profiles for every key: sampled once
+    absorbed: dict[float, SampledProfiles] = {}  # the samples' absorption, per power
 
     def rss(key: tuple[float, ...]) -> FloatArray:
         power, blur_px, gain, sigma_px = (tuple(key) + (0.0, 0.0))[:4]
+        if power not in absorbed:
+            absorbed[power] = replace(samples, groups=tuple(
+                (*group[:4], normalised_absorption(group[4], power, scale, g))
+                for group in samples.groups))
         fit = fit_along(raw_coef, points_px, normals, radius_px, blur_px, 0.25,
                         search_shift=search_shift, order=3,
                         natural_scale=g ** (power - 1.0) * _natural_scale(power, scale, log_gain),
-                        transform=lambda p: normalised_absorption(p, power, scale, g),
-                        enhance=(gain, sigma_px), samples=samples)
+                        enhance=(gain, sigma_px), samples=absorbed[power])
         return np.where(fit.ok, fit.rss, np.inf)
 
     return rss
