@@ -169,6 +169,8 @@ def test_the_graph_is_built_in_csr_order_as_from_its_edge_list(move_px: int) -> 
     cost = ((1.05) / (0.05 + resp)) ** 2
     across = 2.0 * resp * cost / 2.0
     terms = (cost + across, -across * np.cos(2 * direction), -across * np.sin(2 * direction))
+    r0, r1, c0, c1 = graph.box  # the maps _moves reads are on the band's box
+    terms = tuple(t[r0:r1, c0:c1] for t in terms)
     turn = 0.3 * (1.0 + 30.0 * junction[graph.rows, graph.cols])
     src, dst, wt = [], [], []
     for length_px in (move_px,) if move_px <= 3 else (move_px, move_px - 1):
