@@ -312,9 +312,10 @@ class ViewerApp:
             with self._lock:
                 self._autosave()
             self.pending_pair = None
+            # No "opened" toast: the image titles name the files, and the toasts (top left)
+            # would stack over view A's title with the pair's warnings.
             self._set_pair(angio_a, angio_b, Path(path_a).name, Path(path_b).name, None, None)
-            self.notify("Opened", f"A: {Path(path_a).name}, B: {Path(path_b).name}", "success",
-                        client)
+            log.info("opened a new pair")
             return True
 
         return bool(self.guard("Open", client, run))
