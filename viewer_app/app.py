@@ -312,8 +312,7 @@ class ViewerApp:
             with self._lock:
                 self._autosave()
             self.pending_pair = None
-            # No "opened" toast: the image titles name the files, and the toasts (top left)
-            # would stack over view A's title with the pair's warnings.
+            # no "opened" toast: the image titles name the files (toasts cover A's title)
             self._set_pair(angio_a, angio_b, Path(path_a).name, Path(path_b).name, None, None)
             log.info("opened a new pair")
             return True
