@@ -504,6 +504,7 @@ def _trace_pair(
     return tuple(dataclasses.replace(cl, intensity_reason=f"{cl.intensity_reason}; {why}")
                  for cl in picked)
 
+
 def _trace(
     angio: Angiogram,
     clicks_px: np.ndarray,
