@@ -19,6 +19,7 @@ The output files (centerline CSV, report JSON, meshes) are written by
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -40,7 +41,12 @@ from recon.consistency import ConsistencyResult, check_consistency
 from recon.densitometry import with_fill_ratios
 from recon.errors import CoronaryError
 from recon.geometry import MIN_VIEW_SEPARATION_DEG, ViewGeometry, view_separation_deg
-from recon.intensity import resolve_mapping
+from recon.intensity import (
+    IntensityMapping,
+    agreeing_mapping,
+    is_display_processed,
+    resolve_mapping,
+)
 from recon.matching import match_centerlines
 from recon.measure import LumenProfile, Measurements, lumen_profile, measure_lumen
 from recon.optimal_view import OptimalView, optimal_view
@@ -293,10 +299,10 @@ def calibrate_from_seeds(
     cl_a = cl_b = None
     if vesselness is not None:
         seg = _segment(seeds, segment)
-        cl_a = _trace(angio_a, seg.a, vesselness[0], "A",
-                      angio_a.geometry.pixel_mm_at_isocenter, intensity[0])
-        cl_b = _trace(angio_b, seg.b, vesselness[1], "B",
-                      angio_b.geometry.pixel_mm_at_isocenter, intensity[1])
+        cl_a, cl_b = _trace_pair(
+            (angio_a, angio_b), (seg.a, seg.b), vesselness,
+            (angio_a.geometry.pixel_mm_at_isocenter, angio_b.geometry.pixel_mm_at_isocenter),
+            intensity)
     pa, pb = _features(seeds, segment, cl_a, cl_b)
     curves = (cl_a.points_px, cl_b.points_px) if cl_a is not None and cl_b is not None else None
     return calibrate_view_b(angio_a.geometry, angio_b.geometry, pa, pb,
@@ -357,8 +363,8 @@ def reconstruct_pair(
             compute_vesselness(angio_b.image, pixel_mm=pixel_mm_b),
         )
     if traced is None:
-        traced = (_trace(angio_a, seg.a, vesselness[0], "A", pixel_mm_a, options.intensity_a),
-                  _trace(angio_b, seg.b, vesselness[1], "B", pixel_mm_b, options.intensity_b))
+        traced = _trace_pair((angio_a, angio_b), (seg.a, seg.b), vesselness,
+                             (pixel_mm_a, pixel_mm_b), (options.intensity_a, options.intensity_b))
     cl_a, cl_b = traced
     lap("trace")
 
@@ -459,17 +465,58 @@ def reconstruct_pair(
     )
 
 
+def _trace_pair(
+    angios: tuple[Angiogram, Angiogram],
+    clicks_px: tuple[np.ndarray, np.ndarray],
+    vmaps: tuple[VesselnessMap, VesselnessMap],
+    pixel_mm: tuple[float, float],
+    intensity: tuple[str, str],
+) -> tuple[Centerline2D, Centerline2D]:
+    """Both views' traces (A, B). Where both files are display-processed (tag DISP,
+    DRM, ...) and neither mapping is set by the user, each view is traced as lin and
+    as log, and the mapping under which the two views' median radii agree
+    (:func:`recon.intensity.agreeing_mapping`) is used for both; failing that, or if a
+    trace fails under the other mapping, each view keeps its own choice."""
+    views = range(2)
+    names = ("A", "B")
+    own = [_trace(angios[k], clicks_px[k], vmaps[k], names[k], pixel_mm[k], intensity[k])
+           for k in views]
+    tags = [a.info.get("pixel_intensity_relationship") for a in angios]
+    if tuple(intensity) != ("auto", "auto") or not all(is_display_processed(t) for t in tags):
+        return own[0], own[1]
+    traces = {m: [cl if cl.intensity_mapping == m else None for cl in own]
+              for m in ("lin", "log")}
+    try:
+        for m, per_view in traces.items():
+            for k in views:
+                if per_view[k] is None:
+                    forced = resolve_mapping(angios[k].image, tags[k], m, vesselness=vmaps[k])
+                    mapping = IntensityMapping(m, f"PixelIntensityRelationship is {tags[k]}",
+                                               log_gain=forced.log_gain)
+                    per_view[k] = _trace(angios[k], clicks_px[k], vmaps[k], names[k],
+                                         pixel_mm[k], mapping)
+    except CoronaryError:
+        return own[0], own[1]
+    radius_mm = {m: tuple(float(np.nanmedian(cl.radius_px)) * pixel_mm[k]
+                          for k, cl in enumerate(per_view)) for m, per_view in traces.items()}
+    chosen, why = agreeing_mapping(radius_mm)
+    picked = own if chosen is None else traces[chosen]
+    return tuple(dataclasses.replace(cl, intensity_reason=f"{cl.intensity_reason}; {why}")
+                 for cl in picked)
+
+
 def _trace(
     angio: Angiogram,
     clicks_px: np.ndarray,
     vmap: VesselnessMap,
     view: str,
     pixel_mm: float,
-    intensity: str,
+    intensity: str | IntensityMapping,
 ) -> Centerline2D:
-    """One view's trace, with the intensity mapping resolved once for its image."""
+    """One view's trace, with the intensity mapping resolved once for its image (or given)."""
     relationship = angio.info.get("pixel_intensity_relationship")
-    mapping = resolve_mapping(angio.image, relationship, intensity, vesselness=vmap)
+    mapping = intensity if isinstance(intensity, IntensityMapping) else resolve_mapping(
+        angio.image, relationship, intensity, vesselness=vmap)
     return trace_segment(
         angio.image,
         clicks_px,

@@ -39,7 +39,7 @@ from recon.pipeline import (
     ReconstructionOptions,
     _check_separation,
     _notify,
-    _trace,
+    _trace_pair,
     calibrate_view_b,
     check_calibration,
     reconstruct_pair,
@@ -377,10 +377,9 @@ def _trace_both(angio_a: Angiogram, angio_b: Angiogram, seg: Segment,
     """One segment's traces in A and B; in a tree, a failure names the segment."""
     view_a, view_b = angio_a.geometry, angio_b.geometry
     try:
-        return (_trace(angio_a, seg.a, vesselness[0], "A", view_a.pixel_mm_at_isocenter,
-                       options.intensity_a),
-                _trace(angio_b, seg.b, vesselness[1], "B", view_b.pixel_mm_at_isocenter,
-                       options.intensity_b))
+        return _trace_pair((angio_a, angio_b), (seg.a, seg.b), vesselness,
+                           (view_a.pixel_mm_at_isocenter, view_b.pixel_mm_at_isocenter),
+                           (options.intensity_a, options.intensity_b))
     except CoronaryError as err:
         if n_segments == 1:
             raise

@@ -114,6 +114,7 @@ class ViewerApp:
         self._autosave_arg = autosave_path
         self.notifications: list[tuple[str, str, str]] = []  # (level, title, body)
         self.last_click_ms: float = float("nan")
+        self.clicks_handled = 0  # image clicks the server has finished with (marks or not)
         self.reconstruction: Reconstruction | None = None
         self.calibration: CalibrationResult | None = None
         self.progress_log: list[tuple[str, float]] = []
@@ -311,9 +312,9 @@ class ViewerApp:
             with self._lock:
                 self._autosave()
             self.pending_pair = None
+            # no "opened" toast: the image titles name the files (toasts cover A's title)
             self._set_pair(angio_a, angio_b, Path(path_a).name, Path(path_b).name, None, None)
-            self.notify("Opened", f"A: {Path(path_a).name}, B: {Path(path_b).name}", "success",
-                        client)
+            log.info("opened a new pair")
             return True
 
         return bool(self.guard("Open", client, run))
@@ -427,8 +428,15 @@ class ViewerApp:
         outside the image). :attr:`last_click_ms` is the server time from the
         call to the redrawn marks and epipolar line.
         """
+        try:
+            return self._click(view, col, row, client)
+        finally:
+            self.clicks_handled += 1
+
+    def _click(self, view: str, col: float, row: float, client: object | None) -> Mark | None:
         if self.catheter.active:  # two clicks across the catheter, not marks
-            return self.catheter.click(view, col, row, client)
+            self.catheter.click(view, col, row, client)
+            return None
         t0 = time.perf_counter()
         with self._lock:
             try:

@@ -2,7 +2,8 @@
 guiding catheter, and the pixel spacing field of that view filled (recon.catheter).
 
 While a measurement is pending the next two clicks on that view's image go here, not
-to the marks. The edges found are drawn on the image as two short yellow ticks.
+to the marks. The first edge clicked is drawn as a small yellow cross, the edges found
+as two short yellow ticks; the Geometry folder's note says what to do next.
 """
 
 from __future__ import annotations
@@ -10,6 +11,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 import numpy as np
+from numpy.typing import NDArray
 
 from recon.catheter import FRENCH_RANGE, CatheterCalibration, calibrate_from_catheter
 from viewer_app.scene import OVERLAY_Z
@@ -49,8 +51,7 @@ class CatheterTool:
         self.pending, self.clicks = (view, french), []
         self._note(f"Waiting: click once on each edge of the {french:g} F catheter in "
                    f"**{view.upper()}**, across it.")
-        self.app.notify("Catheter", f"click once on each edge of the catheter in "
-                        f"{view.upper()}", "info", client)
+        self.app.server.scene.remove_by_name(f"/over_{view}/catheter")
         return True
 
     def click(self, view: str, col: float, row: float, client: object | None = None) -> None:
@@ -62,7 +63,9 @@ class CatheterTool:
             return
         self.clicks.append((float(col), float(row)))
         if len(self.clicks) < 2:
-            self.app.notify("Catheter", "first edge placed; now the other edge", "info", client)
+            self._note(f"First edge placed in **{view.upper()}** (the cross); now click the "
+                       f"other edge of the {self.pending[1]:g} F catheter.")
+            self._draw_first_edge(view, np.array([col, row], dtype=float))
             return
         view, french = self.pending
         self.pending = None
@@ -103,6 +106,14 @@ class CatheterTool:
                                 thickness_units="screen")
         app.notify("Catheter", f"pixel spacing {view.upper()} {cal.pixel_spacing_mm:.4f} mm "
                    "(in the Geometry folder)", "success", client)
+
+    def _draw_first_edge(self, view: str, edge_px: NDArray[np.float64]) -> None:
+        """A small cross on the image where the first edge was clicked."""
+        v = self.app.views[view]
+        arm = np.array([[-3.0, 0.0], [3.0, 0.0], [0.0, -3.0], [0.0, 3.0]]) + edge_px
+        seg = v.local_from_px(arm, z=1.5 * OVERLAY_Z).reshape(2, 2, 3).astype(np.float32)
+        self.app.server.scene.add_line_segments(f"/over_{view}/catheter", seg, EDGE_COLOR,
+                                                thickness=3.0, thickness_units="screen")
 
     def _note(self, text: str) -> None:
         self.app.panels.geometry.catheter_note.content = text

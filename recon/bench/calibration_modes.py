@@ -78,17 +78,17 @@ def evaluate_case(which) -> dict:
     from recon.calibration import calibrate_supported
     from recon.calibration_curves import calibrate_with_curves
     from recon.centerline import compute_vesselness
-    from recon.pipeline import _features, _trace
+    from recon.pipeline import _features, _trace_pair
 
     case, key = _case(which)
     try:
         a, b = case_angiograms(case)
         va, vb = a.geometry, b.geometry
         seg = case.seeds.segments[0]
-        cl_a = _trace(a, seg.a, compute_vesselness(a.image, pixel_mm=va.pixel_mm_at_isocenter),
-                      "A", va.pixel_mm_at_isocenter, "auto")
-        cl_b = _trace(b, seg.b, compute_vesselness(b.image, pixel_mm=vb.pixel_mm_at_isocenter),
-                      "B", vb.pixel_mm_at_isocenter, "auto")
+        px_mm = (va.pixel_mm_at_isocenter, vb.pixel_mm_at_isocenter)
+        vmaps = (compute_vesselness(a.image, pixel_mm=px_mm[0]),
+                 compute_vesselness(b.image, pixel_mm=px_mm[1]))
+        cl_a, cl_b = _trace_pair((a, b), (seg.a, seg.b), vmaps, px_mm, ("auto", "auto"))
         pa, pb = _features(case.seeds, 0, cl_a, cl_b)
         t0 = time.perf_counter()
         full = calibrate_supported(va, vb, pa, pb, candidates=("full",))

@@ -28,7 +28,12 @@ the pixel size at the isocenter):
 - centerline_rms_px, radius_mae_px: as above, medians over the traces the
   tool returned;
 - radius_bias_pct: median over those traces of the mean signed
-  100 (fitted - true) / true radius, without the first and last 3 px.
+  100 (fitted - true) / true radius, without the first and last 3 px;
+- click_error_px, snap_error_px: median, 90th percentile and fraction above
+  :data:`SUCCESS_PX` of every click's distance to the projected true segment,
+  as clicked and after :func:`snap_click` (as :func:`trace_segment` snaps it),
+  over all traces, refused ones included: whether snapping moves the phantom's
+  clicks nearer the true centre line or away from it.
 """
 
 from __future__ import annotations
@@ -47,7 +52,7 @@ from recon.bench.common import (
     percentile,
     varied_rows,
 )
-from recon.centerline import compute_vesselness, trace_segment
+from recon.centerline import compute_vesselness, snap_click, trace_segment
 from recon.geometry import ViewGeometry
 from recon.synth import make_phantom
 from recon.types import arclength
@@ -197,12 +202,11 @@ def format_table(result: dict) -> str:
 
 # ------------------------------------------------------------------ varied suite
 def _evaluate_varied_view(image: np.ndarray, view: ViewGeometry, clicks_px: np.ndarray,
-                          case, name: str) -> dict:
-    """One trace of the varied suite against the truth; raises what the tracing raises."""
+                          case, name: str, vmap) -> dict:
+    """One trace of the varied suite, given the image's vesselness ``vmap``, against the
+    truth; raises what the tracing raises."""
     tag = case.chain.tag if case.chain is not None else None
     pixel_mm = view.pixel_mm_at_isocenter
-    t0 = time.perf_counter()
-    vmap = compute_vesselness(image, pixel_mm=pixel_mm)
     t1 = time.perf_counter()
     cl = trace_segment(image, clicks_px, vesselness=vmap, view=name,
                        pixel_mm=pixel_mm, relationship=tag)
@@ -236,7 +240,6 @@ def _evaluate_varied_view(image: np.ndarray, view: ViewGeometry, clicks_px: np.n
         "radius_bias_pct": float(100.0 * np.mean(err_r / r_true)) if len(err_r) else float("nan"),
         "radius_true_median_px": float(np.median(radius_true[nearest])),
         "intensity_mapping": getattr(cl, "intensity_mapping", None),
-        "vesselness_ms": 1e3 * (t1 - t0),
         "trace_ms": 1e3 * (t2 - t1),
     }
 
@@ -245,6 +248,24 @@ def _dense_polyline(points: np.ndarray, step: float) -> tuple[np.ndarray, np.nda
     s = arclength(points)
     s_new = np.arange(0.0, s[-1] + 1e-9, step)
     return np.column_stack([np.interp(s_new, s, points[:, k]) for k in range(2)]), s_new
+
+
+def _click_errors(vmap, clicks_px: np.ndarray, seg_px: np.ndarray) -> dict:
+    """Each click's distance (px) to the densified true segment ``seg_px`` (P, 2), as
+    clicked and snapped (NaN where the snap refuses)."""
+    tree = cKDTree(seg_px)
+    snapped = []
+    for c in np.asarray(clicks_px, dtype=float):
+        try:
+            snapped.append(snap_click(vmap, c)[0])
+        except ValueError:
+            snapped.append(np.full(2, np.nan))
+    snapped_px = np.asarray(snapped)
+    d_snap = np.full(len(snapped_px), np.nan)
+    ok = np.all(np.isfinite(snapped_px), axis=1)
+    d_snap[ok] = tree.query(snapped_px[ok])[0]
+    return {"click_error_px": tree.query(np.asarray(clicks_px, float))[0].tolist(),
+            "snap_error_px": d_snap.tolist()}
 
 
 def _varied_case_rows(spec) -> list[dict]:
@@ -261,8 +282,14 @@ def _varied_case_rows(spec) -> list[dict]:
         base = {"chain": spec.chain, "preset": spec.preset_name, "seed": spec.seed,
                 "anatomy": spec.anatomy, "view": name, "size_px": int(view.cols),
                 "pixel_spacing_mm": float(view.pixel_spacing_mm[0])}
+        t0 = time.perf_counter()
+        vmap = compute_vesselness(image, pixel_mm=view.pixel_mm_at_isocenter)
+        base["vesselness_ms"] = 1e3 * (time.perf_counter() - t0)
+        seg, _ = _dense_truth(view, case.truth.segment_X_world, case.truth.segment_radius_mm,
+                              0.1)
+        base.update(_click_errors(vmap, np.asarray(clicks, float), seg))
         try:
-            row = _evaluate_varied_view(image, view, clicks, case, name)
+            row = _evaluate_varied_view(image, view, clicks, case, name, vmap)
         except ValueError as err:  # TraceError (a CoronaryError) included: a failure
             row = {"status": "refused", "success": False, "error": " ".join(str(err).split())}
         rows.append({**base, **row})
@@ -282,9 +309,23 @@ def _figures(rows: list[dict]) -> dict:
         "centerline_rms_px_p90": percentile([r["centerline_rms_px"] for r in done], 90),
         "radius_bias_pct": median(r["radius_bias_pct"] for r in done),
         "radius_mae_px": median(r["radius_mae_px"] for r in done),
-        "vesselness_ms": median(r["vesselness_ms"] for r in done),
+        "vesselness_ms": median(r["vesselness_ms"] for r in rows),
         "trace_ms": median(r["trace_ms"] for r in done),
+        **_click_figures(rows, "click_error_px"),
+        **_click_figures(rows, "snap_error_px"),
     }
+
+
+def _click_figures(rows: list[dict], key: str) -> dict:
+    """Median, 90th percentile and fraction above SUCCESS_PX of one click-error key
+    (a refused snap counts as above)."""
+    d = np.array([e for r in rows for e in r.get(key, [])], dtype=float)
+    if not len(d):
+        return {f"{key}_median": float("nan"), f"{key}_p90": float("nan"),
+                f"{key}_over_{SUCCESS_PX:g}": float("nan")}
+    far = ~(d <= SUCCESS_PX)
+    return {f"{key}_median": float(np.nanmedian(d)), f"{key}_p90": percentile(d, 90),
+            f"{key}_over_{SUCCESS_PX:g}": float(np.mean(far))}
 
 
 def _run_varied(per_chain: int, seed: int) -> dict:
@@ -333,6 +374,12 @@ def _format_varied(result: dict) -> str:
                 f"{f['radius_mae_px']:>9.3f}{f['trace_ms']:>9.0f}")
 
     lines += varied_rows(result, line, "-" * len(head))
+    o, k = result["overall"], f"over_{SUCCESS_PX:g}"
+    lines.append(
+        f"clicks to the true segment, px (median / p90 / fraction above {SUCCESS_PX:g}): as "
+        f"clicked {o['click_error_px_median']:.2f} / {o['click_error_px_p90']:.2f} / "
+        f"{o[f'click_error_px_{k}']:.3f}; snapped {o['snap_error_px_median']:.2f} / "
+        f"{o['snap_error_px_p90']:.2f} / {o[f'snap_error_px_{k}']:.3f}")
     for r in result["failures"]:
         what = r.get("error") or (f"lost {r['lost_px']:.0f} px of the truth "
                                   f"(max gap {r['truth_max_gap_px']:.1f} px)")

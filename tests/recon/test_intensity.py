@@ -13,6 +13,7 @@ from recon.intensity import (
     IntensityMapping,
     ValueScale,
     absorption,
+    agreeing_mapping,
     best_blur,
     best_power,
     noise_trend,
@@ -162,3 +163,17 @@ def test_an_edge_enhanced_display_is_measured_through_its_unsharp_mask() -> None
     as_raw = trace_segment(shown, clicks, relationship="LOG")
     assert "edge enhancement" not in as_raw.intensity_reason
     assert radii(as_raw)[0] < 0.98 * radii(unmasked)[0]
+
+
+def test_agreeing_mapping_takes_the_mapping_under_which_two_views_agree() -> None:
+    mapping, why = agreeing_mapping({"lin": (1.10, 1.08), "log": (1.30, 1.20)})
+    assert mapping == "lin"
+    assert "lin is used for both" in why and "1.30 / 1.20 mm" in why
+    assert agreeing_mapping({"lin": (1.30, 1.20), "log": (1.10, 1.09)})[0] == "log"
+
+
+def test_agreeing_mapping_prefers_neither_within_its_margin_or_without_both_radii() -> None:
+    # 2.0 % against 2.5 %: less than PAIR_MARGIN apart in |ln(r_a / r_b)|
+    assert agreeing_mapping({"lin": (1.02, 1.00), "log": (1.025, 1.00)})[0] is None
+    assert agreeing_mapping({"lin": (1.10, 1.08), "log": (float("nan"), 1.2)})[0] is None
+    assert agreeing_mapping({"lin": (1.10, 1.08)})[0] is None

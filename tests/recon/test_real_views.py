@@ -190,14 +190,6 @@ def test_the_pairs_trace_the_same_branch(reconstructions) -> None:
         assert rec.consistency is None or rec.consistency.ok, rec.consistency.stretches
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="issue 13 target not reached: the pairs' median diameters spread 13.2 % "
-    "(IM1+IM2 2.52, IM3+IM4 2.23, IM7+IM8 2.26 mm); the mapping of these "
-    "display-processed files is read as log in five views and lin in one, and the "
-    "per-view diameters range 2.05-2.59 mm. Strict: the test fails once the target holds, "
-    "so the marker must then go",
-)
 def test_the_median_diameters_of_the_pairs_agree_within_5_pct(reconstructions) -> None:
     medians = {f"IM{i}+IM{j}": float(np.median(rec.profile.diameter_mm))
                for (i, j), rec in reconstructions.items()}

@@ -45,6 +45,24 @@ def test_bench_centerline_varied_keys(tiny_suite):
         assert row["status"] in ("ok", "lost", "refused")
         assert row["success"] == (row["status"] == "ok")
     assert "overall" in centerline.format_table(result)
+    for row in result["rows"]:  # every click measured, refused traces included
+        assert len(row["click_error_px"]) == len(row["snap_error_px"]) >= 2
+    o = result["overall"]
+    assert 0.0 < o["click_error_px_median"] < 1.5  # the click model's 0.7 px per axis
+    assert 0.0 <= o["snap_error_px_over_2"] <= 1.0
+
+
+def test_click_errors_measure_the_snap_against_the_true_centre_line():
+    """A click 3 px off a dark horizontal tube's centre: 3 px as clicked, near 0 snapped."""
+    rows, cols = np.mgrid[0:128, 0:160].astype(float)
+    image = 1.0 - 0.5 * np.clip(1.0 - ((rows - 60.0) / 4.0) ** 2, 0.0, None) ** 0.5
+    from recon.centerline import compute_vesselness
+
+    vmap = compute_vesselness(image.astype(np.float32))
+    seg = np.column_stack([np.arange(20.0, 140.0, 0.1), np.full(1200, 60.0)])
+    err = centerline._click_errors(vmap, np.array([[80.0, 63.0]]), seg)
+    assert err["click_error_px"][0] == pytest.approx(3.0)
+    assert err["snap_error_px"][0] < 0.3
 
 
 def test_bench_reconstruct_varied_keys_and_stability(tiny_suite):
