@@ -490,9 +490,9 @@ def _trace_pair(
         for m, per_view in traces.items():
             for k in views:
                 if per_view[k] is None:
-                    forced = resolve_mapping(angios[k].image, tags[k], m, vesselness=vmaps[k])
-                    mapping = IntensityMapping(m, f"PixelIntensityRelationship is {tags[k]}",
-                                               log_gain=forced.log_gain)
+                    mapping = dataclasses.replace(  # m, with the tag as its reason
+                        resolve_mapping(angios[k].image, tags[k], m, vesselness=vmaps[k]),
+                        reason=f"PixelIntensityRelationship is {tags[k]}")
                     per_view[k] = _trace(angios[k], clicks_px[k], vmaps[k], names[k],
                                          pixel_mm[k], mapping)
     except CoronaryError:

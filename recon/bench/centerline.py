@@ -52,7 +52,12 @@ from recon.bench.common import (
     percentile,
     varied_rows,
 )
-from recon.centerline import compute_vesselness, snap_click, trace_segment
+from recon.centerline import (
+    VesselnessMap,
+    compute_vesselness,
+    snap_click,
+    trace_segment,
+)
 from recon.geometry import ViewGeometry
 from recon.synth import make_phantom
 from recon.types import arclength
@@ -202,7 +207,7 @@ def format_table(result: dict) -> str:
 
 # ------------------------------------------------------------------ varied suite
 def _evaluate_varied_view(image: np.ndarray, view: ViewGeometry, clicks_px: np.ndarray,
-                          case, name: str, vmap) -> dict:
+                          case, name: str, vmap: VesselnessMap) -> dict:
     """One trace of the varied suite, given the image's vesselness ``vmap``, against the
     truth; raises what the tracing raises."""
     tag = case.chain.tag if case.chain is not None else None
@@ -250,7 +255,7 @@ def _dense_polyline(points: np.ndarray, step: float) -> tuple[np.ndarray, np.nda
     return np.column_stack([np.interp(s_new, s, points[:, k]) for k in range(2)]), s_new
 
 
-def _click_errors(vmap, clicks_px: np.ndarray, seg_px: np.ndarray) -> dict:
+def _click_errors(vmap: VesselnessMap, clicks_px: np.ndarray, seg_px: np.ndarray) -> dict:
     """Each click's distance (px) to the densified true segment ``seg_px`` (P, 2), as
     clicked and snapped (NaN where the snap refuses)."""
     tree = cKDTree(seg_px)
