@@ -108,9 +108,9 @@ class CatheterTool:
                    "(in the Geometry folder)", "success", client)
 
     def _draw_first_edge(self, view: str, edge_px: NDArray[np.float64]) -> None:
-        """A small cross on the image where the first edge was clicked."""
+        """A cross (16 image px, wider than the catheter) where the first edge was clicked."""
         v = self.app.views[view]
-        arm = np.array([[-3.0, 0.0], [3.0, 0.0], [0.0, -3.0], [0.0, 3.0]]) + edge_px
+        arm = np.array([[-8.0, 0.0], [8.0, 0.0], [0.0, -8.0], [0.0, 8.0]]) + edge_px
         seg = v.local_from_px(arm, z=1.5 * OVERLAY_Z).reshape(2, 2, 3).astype(np.float32)
         self.app.server.scene.add_line_segments(f"/over_{view}/catheter", seg, EDGE_COLOR,
                                                 thickness=3.0, thickness_units="screen")
