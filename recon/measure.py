@@ -32,7 +32,7 @@ Definitions used here (documented because QCA packages differ):
 from __future__ import annotations
 
 import functools
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -84,7 +84,8 @@ class Measurements:
 
     def to_dict(self) -> dict[str, float | bool]:
         """JSON-ready dict of the fields (plus ``has_lesion``)."""
-        out: dict[str, float | bool] = {k: float(v) for k, v in asdict(self).items()}
+        out: dict[str, float | bool] = {f.name: float(getattr(self, f.name))
+                                        for f in fields(self)}
         out["has_lesion"] = self.has_lesion
         return out
 

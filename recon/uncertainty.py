@@ -466,7 +466,7 @@ def measurement_intervals(
     from recon.densitometry import fill_draws
     from recon.geometry import triangulate
     from recon.measure import lumen_profile, measure_lumen
-    from recon.surface import elliptic_cross_sections
+    from recon.sections import section_areas
     from recon.triangulation import radius_mm_eq11
     from recon.types import arclength
 
@@ -491,9 +491,7 @@ def measurement_intervals(
     dens = None
     if centerline.fill_a is not None and centerline.fill_b is not None:
         dens = fill_draws(centerline, n_samples, np.random.default_rng([seed, 14]))
-    values: dict[str, list[float]] = {}
-    radii = np.empty((n_samples, len(s0)))
-    found = 0
+    draws, views_b = [], []
     for k in range(n_samples):
         pose = posterior.pose_map @ zs[k]
         view_b = view_b_header.with_correction(pose[:3], pose[3:])
@@ -515,13 +513,19 @@ def measurement_intervals(
         if dens is not None:
             cl = replace(cl, fill_a=centerline.fill_a * dens[k, 0],
                          fill_b=centerline.fill_b * dens[k, 1])
-        area = elliptic_cross_sections(cl, view_a, view_b).area_mm2
+        draws.append(cl)
+        views_b.append(view_b)
+    # every draw's sections, and the reported centerline's last, as one stack of rows
+    areas = section_areas([*draws, centerline], view_a, [*views_b, view_b0])
+    values: dict[str, list[float]] = {}
+    found = 0
+    for cl, area in zip(draws, areas, strict=False):
         m = measure_lumen(lumen_profile(cl.s_mm, area))
         found += m.has_lesion
-        radii[k] = np.sqrt(area / np.pi)
         for key, v in m.to_dict().items():
             if key != "has_lesion":
                 values.setdefault(key, []).append(float(v))
+    radii = np.sqrt(areas[:-1] / np.pi)
     nominal = measurements.to_dict()
     ci = {}
     for key, v in values.items():
@@ -530,7 +534,7 @@ def measurement_intervals(
         if not key.endswith("_pct"):
             lo = max(lo, 0.0)
         ci[key] = (float(lo), float(hi))
-    r0 = np.sqrt(elliptic_cross_sections(centerline, view_a, view_b0).area_mm2 / np.pi)
+    r0 = np.sqrt(areas[-1] / np.pi)
     r_sd = np.std(radii, axis=0, ddof=1)
     return MeasurementIntervals(
         ci95=ci,
