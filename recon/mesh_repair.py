@@ -12,14 +12,14 @@ import numpy as np
 import trimesh
 from numpy.typing import NDArray
 
-__all__ = ["repair", "shared_edges", "signed_volume", "pieces"]
+__all__ = ["repair", "nondegenerate_faces", "shared_edges", "signed_volume", "pieces"]
 
 FloatArray = NDArray[np.float64]
 
 
 def repair(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
     """Largest component, no degenerate faces, outward winding."""
-    mesh.update_faces(mesh.nondegenerate_faces())
+    mesh.update_faces(nondegenerate_faces(mesh))
     mesh.remove_unreferenced_vertices()
     adjacency, closed, consistent = shared_edges(mesh.faces)
     labels = trimesh.graph.connected_component_labels(adjacency, len(mesh.faces))
@@ -35,6 +35,24 @@ def repair(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
     if signed_volume(mesh.vertices, mesh.faces) < 0:
         mesh.invert()
     return mesh
+
+
+def nondegenerate_faces(mesh: trimesh.Trimesh) -> NDArray[np.bool_]:
+    """trimesh's ``mesh.nondegenerate_faces()`` (F,) mask (both heights of a face's
+    oriented box above ``tol.merge``): a face whose heights are clearly above it (100
+    times, far beyond rounding) is kept here; trimesh decides the few others itself."""
+    v0, v1, v2 = (mesh.vertices[mesh.faces[:, k]] for k in range(3))
+    edge_a, edge_b = v1 - v0, v2 - v0  # the box's edges (trimesh's extents)
+    twice_area = np.cross(edge_a, edge_b)
+    area2 = np.einsum("ij,ij->i", twice_area, twice_area)
+    longest2 = np.maximum(np.einsum("ij,ij->i", edge_a, edge_a),
+                          np.einsum("ij,ij->i", edge_b, edge_b))
+    keep = area2 > (100.0 * trimesh.tol.merge) ** 2 * longest2  # heights > 100 tol.merge
+    unsure = np.flatnonzero(~keep)
+    if unsure.size:
+        triangles = np.stack([v0[unsure], v1[unsure], v2[unsure]], axis=1)
+        keep[unsure] = trimesh.triangles.nondegenerate(triangles, height=trimesh.tol.merge)
+    return keep
 
 
 def shared_edges(faces: NDArray[np.int64]) -> tuple[NDArray[np.int64], bool, bool]:

@@ -130,3 +130,24 @@ def test_ball_voxels_are_the_clipped_balls_near_and_away_from_the_edges() -> Non
     assert set(got.tolist()) == expected
     inside = surface._ball_voxels(base[:1] * 0 + 7, radius[:1], shape)  # one ball, inside
     assert len(inside) == np.count_nonzero(norm <= radius[0])
+
+
+def test_nondegenerate_faces_agree_with_trimesh() -> None:
+    """Slivers at, below and above trimesh's merge tolerance, zero-length edges and
+    coincident vertices among ordinary faces: the same mask as trimesh's."""
+    rng = np.random.default_rng(5)
+    verts = [rng.uniform(-5.0, 5.0, (60, 3))]
+    faces = [rng.integers(0, 60, (80, 3))]
+    base = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]])
+    for k, h in enumerate([0.0, 1e-9, 1e-8, 2e-8, 1e-7, 1e-6, 1.01e-6, 1e-3]):
+        tip = np.array([[0.5, h, 0.0]])  # a triangle of height h over a unit edge
+        verts.append(np.vstack([base, tip]) + 10.0 * k)
+        faces.append(np.array([[0, 1, 2]]) + 60 + 3 * k)
+    verts.append(np.zeros((3, 3)))  # all three vertices in one point
+    faces.append(np.array([[0, 1, 2]]) + 60 + 3 * 8)
+    verts.append(np.array([[0.0, 0.0, 0.0], [1e-9, 0.0, 0.0], [0.0, 1e-9, 0.0]]))  # tiny
+    faces.append(np.array([[0, 1, 2]]) + 60 + 3 * 9)
+    mesh = trimesh.Trimesh(np.vstack(verts), np.vstack(faces), process=False)
+    expected = mesh.nondegenerate_faces()
+    assert not expected.all() and expected[:80].any()
+    np.testing.assert_array_equal(mesh_repair.nondegenerate_faces(mesh), expected)
