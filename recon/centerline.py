@@ -583,9 +583,13 @@ def _check_trace(vmap: VesselnessMap, points: FloatArray, radius: FloatArray,
     seg = int(np.clip(np.searchsorted(click_at, problem.index, side="right") - 1, 0,
                       len(click_at) - 2))
     near = points[problem.index]
+    # A hairpin is also what a vessel that folds back in projection shows (a bend seen
+    # along the ray); there a waypoint does not help, another view does.
+    fold = (", or, if the vessel folds back on itself there in this view, choose another "
+            "view") if problem.kind == "doubles back" else ""
     raise TraceError(
         f"view {view}: the trace between click {seg + 1} and click {seg + 2} "
         f"{problem.kind} near ({near[0]:.0f}, {near[1]:.0f}); add a waypoint on the "
-        "vessel there",
+        f"vessel there{fold}",
         view=view, near_px=near,
     )

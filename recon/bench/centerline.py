@@ -29,6 +29,11 @@ the pixel size at the isocenter):
   tool returned;
 - radius_bias_pct: median over those traces of the mean signed
   100 (fitted - true) / true radius, without the first and last 3 px;
+- trace_success_answered: the same after a simulated clinician answers the tool's
+  refusals: a refusal that names a place gets a waypoint clicked on the projected
+  true segment nearest it, and the segment is traced again (at most
+  :data:`ANSWER_ROUNDS` waypoints a trace); a trace lost without a refusal stays
+  lost (nothing told the clinician where to look);
 - click_error_px, snap_error_px: median, 90th percentile and fraction above
   :data:`SUCCESS_PX` of every click's distance to the projected true segment,
   as clicked and after :func:`snap_click` (as :func:`trace_segment` snaps it),
@@ -69,6 +74,8 @@ CASES = 10  # phantom cases when run(cases=None)
 END_EXCLUSION_PX = 3.0
 #: A trace succeeds when no point of the projected true segment is farther than this (px).
 SUCCESS_PX = 2.0
+#: Refusals a simulated clinician answers with a waypoint where the tool asks, per trace.
+ANSWER_ROUNDS = 2
 
 
 def _dense_truth(
@@ -297,8 +304,44 @@ def _varied_case_rows(spec) -> list[dict]:
             row = _evaluate_varied_view(image, view, clicks, case, name, vmap)
         except ValueError as err:  # TraceError (a CoronaryError) included: a failure
             row = {"status": "refused", "success": False, "error": " ".join(str(err).split())}
-        rows.append({**base, **row})
+            row.update(_answered(image, view, np.asarray(clicks, float), case, name, vmap,
+                                 seg, err, np.random.default_rng([spec.seed, ord(name)])))
+        rows.append({**base, "answered_success": row["success"], "answered_waypoints": 0,
+                     **row})
     return rows
+
+
+def _answered(image: np.ndarray, view: ViewGeometry, clicks_px: np.ndarray, case, name: str,
+              vmap: VesselnessMap, seg_px: np.ndarray, err: ValueError,
+              rng: np.random.Generator) -> dict:
+    """The trace after the clinician answers the tool's refusals: each refusal that names
+    a place (``TraceError.near_px``) gets a waypoint clicked (:func:`click_px`) on the
+    projected true segment ``seg_px`` (P, 2) nearest that place, in order along it, at
+    most :data:`ANSWER_ROUNDS` times; a refusal that names no place stays a failure.
+    Returns the row's ``answered_success`` and ``answered_waypoints``."""
+    from recon.synth.clicks import click_px
+
+    s_seg = arclength(seg_px)
+    tree = cKDTree(seg_px)
+    clicks = np.asarray(clicks_px, float)
+    for added in range(1, ANSWER_ROUNDS + 1):
+        near = getattr(err, "near_px", None)
+        if near is None:
+            break
+        at = int(tree.query(near)[1])
+        if not 0 < s_seg[at] < s_seg[-1]:
+            break
+        way = click_px(rng, seg_px[at][None])[0]
+        s_clicks = s_seg[tree.query(clicks)[1]]
+        pos = int(np.clip(np.searchsorted(s_clicks[1:-1], s_seg[at]) + 1, 1, len(clicks) - 1))
+        clicks = np.insert(clicks, pos, way, axis=0)
+        try:
+            row = _evaluate_varied_view(image, view, clicks, case, name, vmap)
+        except ValueError as again:
+            err = again
+            continue
+        return {"answered_success": row["success"], "answered_waypoints": added}
+    return {"answered_success": False, "answered_waypoints": 0}
 
 
 def _figures(rows: list[dict]) -> dict:
@@ -308,6 +351,8 @@ def _figures(rows: list[dict]) -> dict:
         "cases": len({(r["chain"], r["preset"], r["seed"]) for r in rows}),
         "traces": len(rows),
         "trace_success": float(np.mean([r["success"] for r in rows])) if rows else float("nan"),
+        "trace_success_answered": float(np.mean([r["answered_success"] for r in rows]))
+        if rows else float("nan"),
         "refused": sum(r["status"] == "refused" for r in rows),
         "lost": sum(r["status"] == "lost" for r in rows),
         "centerline_rms_px": median(r["centerline_rms_px"] for r in done),
@@ -359,7 +404,8 @@ def _run_varied(per_chain: int, seed: int) -> dict:
         "notes": (
             f"trace success: no point of the projected true segment more than {SUCCESS_PX:g} "
             f"px from the trace (first and last {END_EXCLUSION_PX:g} px of the truth left out);"
-            " a refused trace (TraceError) is a failure; rms, radius: medians over the traces "
+            " a refused trace (TraceError) is a failure; answered: after a waypoint where each"
+            f" refusal asks (at most {ANSWER_ROUNDS}); rms, radius: medians over the traces "
             "returned; radius_bias_pct: median of each trace's mean signed "
             "100 (fitted - true) / true"
         ),
@@ -367,14 +413,15 @@ def _run_varied(per_chain: int, seed: int) -> dict:
 
 
 def _format_varied(result: dict) -> str:
-    head = (f"{'chain':<22}{'cases':>6}{'traces':>7}{'success':>9}{'refused':>8}{'lost':>6}"
+    head = (f"{'chain':<22}{'cases':>6}{'traces':>7}{'success':>9}{'answered':>9}{'refused':>8}"
+            f"{'lost':>6}"
             f"{'rms px':>8}{'p90 px':>8}{'r bias %':>9}{'r MAE px':>9}{'trace ms':>9}")
     lines = [f"centerline benchmark, varied suite ({result['cases_per_chain']} cases per chain, "
              f"seed {result['seed']})", head, "-" * len(head)]
 
     def line(name: str, f: dict) -> str:
         return (f"{name:<22}{f['cases']:>6}{f['traces']:>7}{f['trace_success']:>9.3f}"
-                f"{f['refused']:>8}{f['lost']:>6}{f['centerline_rms_px']:>8.3f}"
+                f"{f['trace_success_answered']:>9.3f}{f['refused']:>8}{f['lost']:>6}{f['centerline_rms_px']:>8.3f}"
                 f"{f['centerline_rms_px_p90']:>8.3f}{f['radius_bias_pct']:>+9.2f}"
                 f"{f['radius_mae_px']:>9.3f}{f['trace_ms']:>9.0f}")
 

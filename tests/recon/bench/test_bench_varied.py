@@ -13,8 +13,8 @@ from recon.bench.common import jitter_seeds, rigid_rms_mm
 from recon.geometry import rotation_from_rotvec
 from recon.synth import make_phantom
 
-CHAIN_KEYS = {"cases", "traces", "trace_success", "refused", "lost", "centerline_rms_px",
-              "radius_bias_pct", "radius_mae_px"}
+CHAIN_KEYS = {"cases", "traces", "trace_success", "trace_success_answered", "refused", "lost",
+              "centerline_rms_px", "radius_bias_pct", "radius_mae_px"}
 RECON_KEYS = {"cases", "succeeded", "failed", "abs_mld_error_mm", "p90_abs_mld_error_mm",
               "abs_length_error_pct", "abs_volume_error_pct", "centerline_3d_rms_rigid_mm",
               "max_centerline_3d_rms_rigid_mm", "failures"}
@@ -44,12 +44,57 @@ def test_bench_centerline_varied_keys(tiny_suite):
     for row in result["rows"]:
         assert row["status"] in ("ok", "lost", "refused")
         assert row["success"] == (row["status"] == "ok")
+        if row["status"] != "refused":  # only a refusal is answered
+            assert row["answered_success"] == row["success"]
+            assert row["answered_waypoints"] == 0
     assert "overall" in centerline.format_table(result)
     for row in result["rows"]:  # every click measured, refused traces included
         assert len(row["click_error_px"]) == len(row["snap_error_px"]) >= 2
     o = result["overall"]
     assert 0.0 < o["click_error_px_median"] < 1.5  # the click model's 0.7 px per axis
     assert 0.0 <= o["snap_error_px_over_2"] <= 1.0
+
+
+def test_a_refusal_is_answered_with_a_waypoint_on_the_truth_where_it_asks(monkeypatch):
+    """The simulated clinician clicks the true segment nearest the place a refusal names,
+    puts that waypoint in order along the segment, and stops at a refusal that names no
+    place or after ANSWER_ROUNDS waypoints."""
+    from recon.trace_error import TraceError
+
+    seg = np.column_stack([np.arange(0.0, 100.0, 0.1), np.full(1000, 50.0)])
+    clicks = np.array([[0.0, 50.0], [60.0, 50.0], [99.9, 50.0]])
+    seen = []
+
+    def refuse_then_succeed(image, view, clicks_px, case, name, vmap):
+        seen.append(np.array(clicks_px))
+        if len(seen) == 1:
+            raise TraceError("again", near_px=(80.0, 47.0))
+        return {"success": True}
+
+    monkeypatch.setattr(centerline, "_evaluate_varied_view", refuse_then_succeed)
+    first = TraceError("between click 1 and click 2", near_px=(30.0, 53.0))
+    out = centerline._answered(None, None, clicks, None, "A", None, seg, first,
+                               np.random.default_rng(0))
+    assert out == {"answered_success": True, "answered_waypoints": 2}
+    assert [len(c) for c in seen] == [4, 5]
+    np.testing.assert_allclose(seen[1][[0, 2, 4]], clicks, atol=0)  # the clicks kept
+    assert abs(seen[1][1, 0] - 30.0) < 3.0 and abs(seen[1][3, 0] - 80.0) < 3.0  # in order
+    assert np.all(np.abs(seen[1][[1, 3], 1] - 50.0) < 3.0)  # on the truth, click noise
+
+    seen.clear()
+    out = centerline._answered(None, None, clicks, None, "A", None, seg,
+                               TraceError("no place"), np.random.default_rng(0))
+    assert out == {"answered_success": False, "answered_waypoints": 0} and not seen
+
+    def always_refuse(image, view, clicks_px, case, name, vmap):
+        seen.append(np.array(clicks_px))
+        raise TraceError("still", near_px=(50.0, 50.0))
+
+    monkeypatch.setattr(centerline, "_evaluate_varied_view", always_refuse)
+    out = centerline._answered(None, None, clicks, None, "A", None, seg, first,
+                               np.random.default_rng(0))
+    assert out == {"answered_success": False, "answered_waypoints": 0}
+    assert len(seen) == centerline.ANSWER_ROUNDS
 
 
 def test_click_errors_measure_the_snap_against_the_true_centre_line():
