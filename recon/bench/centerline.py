@@ -318,13 +318,15 @@ def _answered(image: np.ndarray, view: ViewGeometry, clicks_px: np.ndarray, case
     a place (``TraceError.near_px``) gets a waypoint clicked (:func:`click_px`) on the
     projected true segment ``seg_px`` (P, 2) nearest that place, in order along it, at
     most :data:`ANSWER_ROUNDS` times; a refusal that names no place stays a failure.
-    Returns the row's ``answered_success`` and ``answered_waypoints``."""
+    Returns the row's ``answered_success`` and ``answered_waypoints`` (the waypoints
+    added)."""
     from recon.synth.clicks import click_px
 
     s_seg = arclength(seg_px)
     tree = cKDTree(seg_px)
     clicks = np.asarray(clicks_px, float)
-    for added in range(1, ANSWER_ROUNDS + 1):
+    added = 0
+    while added < ANSWER_ROUNDS:
         near = getattr(err, "near_px", None)
         if near is None:
             break
@@ -335,13 +337,14 @@ def _answered(image: np.ndarray, view: ViewGeometry, clicks_px: np.ndarray, case
         s_clicks = s_seg[tree.query(clicks)[1]]
         pos = int(np.clip(np.searchsorted(s_clicks[1:-1], s_seg[at]) + 1, 1, len(clicks) - 1))
         clicks = np.insert(clicks, pos, way, axis=0)
+        added += 1
         try:
             row = _evaluate_varied_view(image, view, clicks, case, name, vmap)
         except ValueError as again:
             err = again
             continue
         return {"answered_success": row["success"], "answered_waypoints": added}
-    return {"answered_success": False, "answered_waypoints": 0}
+    return {"answered_success": False, "answered_waypoints": added}
 
 
 def _figures(rows: list[dict]) -> dict:

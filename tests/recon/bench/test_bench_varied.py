@@ -93,8 +93,8 @@ def test_a_refusal_is_answered_with_a_waypoint_on_the_truth_where_it_asks(monkey
     monkeypatch.setattr(centerline, "_evaluate_varied_view", always_refuse)
     out = centerline._answered(None, None, clicks, None, "A", None, seg, first,
                                np.random.default_rng(0))
-    assert out == {"answered_success": False, "answered_waypoints": 0}
-    assert len(seen) == centerline.ANSWER_ROUNDS
+    assert out == {"answered_success": False, "answered_waypoints": centerline.ANSWER_ROUNDS}
+    assert [len(c) for c in seen] == [4, 5][: centerline.ANSWER_ROUNDS]
 
 
 def test_click_errors_measure_the_snap_against_the_true_centre_line():
