@@ -27,12 +27,7 @@ import viser
 from numpy.typing import NDArray
 
 from recon.errors import LoadError, OutputError
-from recon.io import (
-    demo_paths,
-    load_angiogram,
-    load_seeds,
-    save_seeds,
-)
+from recon.io import demo_paths, load_angiogram, load_seeds, save_seeds
 from recon.seeds import Seeds
 from recon.types import Angiogram
 from viewer_app import scene
@@ -224,8 +219,9 @@ class ViewerApp:
         """Run ``func``; user errors (ValueError) and bugs become notifications, not a dead page."""
         try:
             return func()
-        except ValueError as exc:
+        except ValueError as exc:  # a refused trace's place is ringed on its view too
             self.notify(f"{what} failed", str(exc).splitlines()[0], "error", client)
+            scene.draw_refusal(self.server.scene, self.views, exc)
         except Exception as exc:
             log.error("%s: %s", what, traceback.format_exc())
             self.notify(f"{what} failed", f"internal error: {exc!r}", "error", client)

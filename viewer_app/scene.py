@@ -52,6 +52,7 @@ __all__ = [
     "clear_results",
     "draw_marks",
     "draw_flagged",
+    "draw_refusal",
     "draw_reconstruction",
     "diameter_colors",
     "lesion_points",
@@ -285,7 +286,8 @@ def clear_results(scene: viser.SceneApi, views: Mapping[str, View]) -> None:
         v.nodes.trace.points = np.zeros((0, 2, 3), np.float32)
         v.nodes.backproj.points = np.zeros((0, 2, 3), np.float32)
     names = ["/model"] + [f"{overlay_name(k)}/{n}" for k in views
-                          for n in ("flagged", "flag_labels", "lesion", "lesion_labels")]
+                          for n in ("flagged", "flag_labels", "lesion", "lesion_labels",
+                                    "refusal", "refusal_label")]
     for name in names:
         try:
             scene.remove_by_name(name)
@@ -373,6 +375,7 @@ def draw_reconstruction(
     lumen diameter with the MLD marked, and the 3D centerline, above the images."""
     from scipy.spatial import cKDTree
 
+    draw_refusal(scene, views, None)  # a reconstruction replaces a refusal's ring
     X = np.asarray(rec.centerline_3d.X_world, dtype=float)
     s = np.asarray(rec.centerline_3d.s_mm, dtype=float)
     for key, cl, geom in (("a", rec.centerline_a, rec.view_a), ("b", rec.centerline_b,
@@ -454,6 +457,46 @@ def draw_flagged(scene: viser.SceneApi, views: Mapping[str, View], rec: Reconstr
                             position=tuple(p + np.array([0.01, -0.01, 0.0])),
                             anchor="bottom-left", font_screen_scale=0.8)
     return len(stretches)
+
+
+#: The ring round the place a refused trace names: this fraction of the image's longer
+#: side, at least REFUSAL_MIN_PX.
+REFUSAL_RING = 0.03
+REFUSAL_MIN_PX = 10.0
+
+
+def draw_refusal(scene: viser.SceneApi, views: Mapping[str, View], error: object | None
+                 ) -> bool:
+    """A ring in FLAGGED_COLOR round the place a refused trace names (a
+    :class:`~recon.trace_error.TraceError`'s ``view`` and ``near_px``: where a waypoint
+    would help), labelled, on that view; ``error`` None removes it. An error that names
+    no place changes nothing. Returns whether a place was drawn."""
+    if error is None:
+        for key in views:
+            for name in ("refusal", "refusal_label"):
+                try:
+                    scene.remove_by_name(f"{overlay_name(key)}/{name}")
+                except Exception:
+                    log.debug("no refusal mark on %s", key, exc_info=True)
+        return False
+    key = str(getattr(error, "view", None) or "").lower()
+    near = getattr(error, "near_px", None)
+    if key not in views or near is None:
+        return False
+    draw_refusal(scene, views, None)
+    v = views[key]
+    radius_px = max(REFUSAL_RING * max(v.cols, v.rows), REFUSAL_MIN_PX)
+    t = np.linspace(0.0, 2.0 * np.pi, 49)
+    ring_px = np.asarray(near, float)[None, :] + radius_px * np.column_stack([np.cos(t),
+                                                                               np.sin(t)])
+    ring = polyline_segments(v.local_from_px(ring_px, z=OVERLAY_Z * 1.6))
+    scene.add_line_segments(f"{overlay_name(key)}/refusal", ring.astype(np.float32),
+                            FLAGGED_COLOR, thickness=4.0, thickness_units="screen")
+    top = v.local_from_px(np.asarray(near, float)[None, :] + [radius_px, -radius_px],
+                          z=OVERLAY_Z * 1.6)[0]
+    scene.add_label(f"{overlay_name(key)}/refusal_label", "⚠ trace refused here",
+                    position=tuple(top), anchor="bottom-left", font_screen_scale=0.8)
+    return True
 
 
 CAMERA_FOV_RAD = float(np.radians(75.0))  # viser's default vertical field of view

@@ -125,9 +125,9 @@ def _outcome(outcome: tuple | None, code: int, stderr_lines: list[bytes], what: 
     if outcome is not None and outcome[0] == "result":
         return outcome[1]
     if outcome is not None:
-        _, kind, cls_path, message = outcome
+        _, kind, cls_path, message, *whole = outcome
         if kind == "coronary":
-            raise _project_error(cls_path, message)
+            raise _project_error(cls_path, message, whole[0] if whole else None)
         raise JobFailed(cls_path, message)
     last = next((ln.decode(errors="replace").strip() for ln in reversed(stderr_lines)
                  if ln.strip()), "")
@@ -194,7 +194,16 @@ def _fork_server() -> Any:
     return _SERVER[0]
 
 
-def _project_error(cls_path: str, message: str) -> CoronaryError:
+def _project_error(cls_path: str, message: str, whole: bytes | None = None) -> CoronaryError:
+    """The child's error: unpickled whole where it came so (with its attributes), else its
+    class (the base class if that cannot be rebuilt) with its one line."""
+    if whole is not None:
+        try:
+            exc = pickle.loads(whole)
+            if isinstance(exc, CoronaryError) and str(exc) == message:
+                return exc
+        except Exception:  # noqa: BLE001 - fall back to the class and the line
+            pass
     module, _, name = cls_path.rpartition(".")
     try:
         cls = getattr(importlib.import_module(module), name)
@@ -271,8 +280,12 @@ def _run_target(target: str, args: tuple, wants_progress: bool,
         value = getattr(importlib.import_module(module), name)(*args, **kwargs)
     except CoronaryError as exc:
         cls = type(exc)
+        try:  # the error itself too, where it pickles (a TraceError's view and place)
+            whole = pickle.dumps(exc, protocol=pickle.HIGHEST_PROTOCOL)
+        except Exception:  # noqa: BLE001 - its class and line are enough then
+            whole = None
         send(("error", "coronary", f"{cls.__module__}.{cls.__qualname__}",
-              " ".join(str(exc).split())))
+              " ".join(str(exc).split()), whole))
         return 2
     except Exception as exc:  # noqa: BLE001 - reported to the parent, which decides
         send(("error", "internal", type(exc).__name__, " ".join(str(exc).split())))

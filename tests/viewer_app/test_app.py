@@ -354,3 +354,33 @@ def test_reconstruct_past_its_memory_limit_says_which_and_the_viewer_goes_on(
                            "(--max-memory-gb")
     app.limits = (None, None)
     assert app.reconstruct() is not None  # the server was not touched by the limit
+
+
+def test_a_refused_trace_is_ringed_where_it_asks_for_a_waypoint(app: ViewerApp) -> None:
+    """Issue 13: a trace the tool refuses is named in one line and its place is ringed on
+    its view (through the reconstruction's child process); a reconstruction that runs
+    removes the ring."""
+    from dataclasses import replace
+
+    from recon.seeds import Seeds
+
+    seeds = app.seeds()
+    seg = seeds.segments[0]
+    a = seg.a_px  # proximal, two waypoints, distal: the distal end clicked second
+    out_of_order = (a[0], a[-1], a[1], a[2])
+    app.state.load_seeds(Seeds(segments=(replace(seg, a_px=out_of_order),),
+                               features=seeds.features))
+    assert app.reconstruct() is None
+    level, title, body = app.notifications[-1]
+    assert (level, title) == ("error", "Reconstruct failed")
+    assert body.startswith("view A: the trace doubles back at click 2 ") and "\n" not in body
+    ring = app.server.scene.get_handle_by_name("/over_a/refusal")
+    assert ring is not None and app.server.scene.get_handle_by_name("/over_b/refusal") is None
+    centre_local = ring.points.reshape(-1, 3)[:, :2].mean(axis=0)
+    centre_px = app.views["a"].px_from_local(centre_local)
+    assert np.hypot(*(centre_px - np.asarray(a[-1]))) < 3.0  # round the second click
+    assert app.server.scene.get_handle_by_name("/over_a/refusal_label") is not None
+
+    app.state.load_seeds(seeds)
+    assert app.reconstruct() is not None
+    assert app.server.scene.get_handle_by_name("/over_a/refusal") is None

@@ -292,6 +292,40 @@ def test_a_new_pair_shows_no_old_marks(
 
 
 @pytest.mark.skipif(not Path(CHROMIUM).is_file(), reason=f"no browser at {CHROMIUM}")
+def test_a_refused_trace_is_ringed_on_the_page(
+    demo_case: dict[str, Path], tmp_path: Path, artifacts_dir: Path
+) -> None:
+    """Issue 13: the page shows the refusal's one line and a ring where it asks for a
+    waypoint (view A's distal end clicked second: the trace doubles back there)."""
+    from dataclasses import replace
+
+    from recon.seeds import Seeds
+
+    sync_api = pytest.importorskip("playwright.sync_api", reason="playwright is not installed")
+    app = ViewerApp(str(demo_case["a"]), str(demo_case["b"]), str(demo_case["seeds"]),
+                    port=0, autosave_path=tmp_path / "autosave.json")
+    seeds = app.seeds()
+    seg = seeds.segments[0]
+    a = seg.a_px
+    app.state.load_seeds(Seeds(segments=(replace(seg, a_px=(a[0], a[-1], a[1], a[2])),),
+                               features=seeds.features))
+    with sync_api.sync_playwright() as pw:
+        b = Browser(pw, tmp_path / "profile", artifacts_dir)
+        try:
+            b.open(app)
+            assert app.reconstruct() is None
+            b.page.get_by_text("Reconstruct failed").first.wait_for(state="visible",
+                                                                    timeout=20_000)
+            b.page.wait_for_function(
+                "() => '/over_a/refusal' in window.__viserMutable.nodeRefFromName",
+                timeout=10_000)
+            b.shot("refused_trace_ringed.png")
+        finally:
+            b.close()
+            app.stop()
+
+
+@pytest.mark.skipif(not Path(CHROMIUM).is_file(), reason=f"no browser at {CHROMIUM}")
 def test_guided_session_from_an_empty_page_to_a_mesh(
     demo_case: dict[str, Path], tmp_path: Path, artifacts_dir: Path
 ) -> None:
