@@ -46,6 +46,7 @@ from recon.pipeline import (
 )
 from recon.seeds import Seeds, Segment
 from recon.surface import TreeSurface, build_tree_surface
+from recon.trace_error import TraceError
 from recon.triangulation import point_polyline_distance
 from recon.types import Angiogram, Centerline2D, arclength
 
@@ -383,7 +384,10 @@ def _trace_both(angio_a: Angiogram, angio_b: Angiogram, seg: Segment,
     except CoronaryError as err:
         if n_segments == 1:
             raise
-        raise PipelineError(f"segment {seg.name!r}: {err}") from err
+        named = f"segment {seg.name!r}: {err}"
+        if isinstance(err, TraceError):  # its view and place stay (the viewer rings them)
+            raise TraceError(named, view=err.view, near_px=err.near_px) from err
+        raise PipelineError(named) from err
 
 
 def _ms(since: float) -> float:

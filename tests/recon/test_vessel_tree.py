@@ -292,3 +292,25 @@ def test_a_branch_origin_traced_along_its_parent_is_redrawn_from_the_clear_view(
     after = np.max(point_polyline_distance(b_new.points_px[changed], true_b))
     assert before > 3.0 and after < 1.0, (before, after)
     assert np.all(b_new.reliability[changed] <= TREE_OVERLAP_RELIABILITY)
+
+
+def test_a_refused_branch_trace_names_its_segment_view_and_place():
+    """In a tree a refused trace names its segment and stays a TraceError with its view
+    and place (what the viewer rings)."""
+    from dataclasses import replace
+
+    from recon.io import demo_paths, load_angiogram, load_seeds
+    from recon.seeds import Seeds
+    from recon.trace_error import TraceError
+
+    demo = demo_paths()
+    a, b = load_angiogram(demo["a"]), load_angiogram(demo["b"])
+    seeds = load_seeds(demo["seeds"])
+    seg = seeds.segments[0]
+    p = seg.a_px  # a second segment whose distal end in A is clicked second
+    bad = replace(seg, name="again", a_px=(p[0], p[-1], p[1], p[2]))
+    with pytest.raises(TraceError, match=r"^segment 'again': view A: the trace doubles back "
+                                         r"at click 2 ") as info:
+        reconstruct_tree(a, b, Seeds(segments=(seg, bad), features=seeds.features))
+    assert info.value.view == "A"
+    np.testing.assert_allclose(info.value.near_px, p[-1], atol=3.0)
