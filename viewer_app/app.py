@@ -492,6 +492,7 @@ class ViewerApp:
             self.state.clear()
             self._redraw_marks()
             self._autosave()
+            scene.draw_refusal(self.server.scene, self.views, None)  # its marks are gone
 
     @property
     def epipolar_segments(self) -> dict[str, FloatArray | None]:
@@ -530,6 +531,7 @@ class ViewerApp:
                 self.state.load_seeds(seeds)
                 self._redraw_marks()
                 self._autosave()
+                scene.draw_refusal(self.server.scene, self.views, None)
             return True
 
         return bool(self.guard("Load seeds", client, run))

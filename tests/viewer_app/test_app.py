@@ -384,3 +384,10 @@ def test_a_refused_trace_is_ringed_where_it_asks_for_a_waypoint(app: ViewerApp) 
     app.state.load_seeds(seeds)
     assert app.reconstruct() is not None
     assert app.server.scene.get_handle_by_name("/over_a/refusal") is None
+    # Clearing the marks (or loading others) removes a ring the old marks caused.
+    app.state.load_seeds(Seeds(segments=(replace(seg, a_px=out_of_order),),
+                               features=seeds.features))
+    assert app.reconstruct() is None
+    assert app.server.scene.get_handle_by_name("/over_a/refusal") is not None
+    app.clear()
+    assert app.server.scene.get_handle_by_name("/over_a/refusal") is None
