@@ -76,6 +76,11 @@ _MAX_MOVE_PX = 4
 #: The route's crop reaches this fraction of the clicks' extent beyond them (a loop
 #: or a bend may lie well outside the clicks' box).
 _CROP_MARGIN = 1.0
+#: A route's search is first bounded at these multiples of _LIMIT_PER_PX x the straight
+#: distance between its clicks (a route's cost per px of chord), then without a bound
+#: (:meth:`_Graph.solve`; the result is the unbounded search's in every case).
+_LIMIT_PER_PX = 2.0
+_LIMIT_STEPS = (1.0, 3.0, 12.0)
 #: At a waypoint the heading may change by at most this many steps (90 deg).
 _WAYPOINT_TURN = 4
 #: Loops are looked for in the band and above these multiples of its response level
@@ -170,7 +175,8 @@ class _Graph:
         self.graph = csr_matrix((data, indices, indptr), shape=(m, m))
         self.cost_px = cost_px[self.rows - self.box[0], self.cols - self.box[2]]  # (n,)
         # the shortest-path tree of the last search from all of a pixel's headings
-        self._last_tree: tuple[tuple[int, bytes], tuple[FloatArray, IntArray]] | None = None
+        self._last_tree: tuple[tuple[int, bytes, float], tuple[FloatArray, IntArray]] | None = \
+            None
 
     def _moves(self, length_px: int, terms: tuple[FloatArray, FloatArray, FloatArray],
                log_scale: FloatArray):
@@ -214,22 +220,35 @@ class _Graph:
         p0 = self.index[start_rc]
         sources = p0 * N_HEADINGS + headings
         key = (int(p0), np.asarray(headings).tobytes())
-        if self._last_tree is not None and self._last_tree[0] == key:
-            dist, pred = self._last_tree[1]  # a route through apices starts where one did
-        else:
-            dist, pred, _ = dijkstra(self.graph, directed=True, indices=sources, min_only=True,
-                                     return_predecessors=True)
-            if len(headings) == N_HEADINGS:
-                self._last_tree = (key, (dist, pred))
-        per_pixel = dist.reshape(-1, N_HEADINGS)
         d_end = np.hypot(self.rows - end_rc[0], self.cols - end_rc[1])
         near = d_end <= reach_px
-        finite = np.isfinite(per_pixel)
+        end_cost = (d_end * self.cost_px)[:, None]
+        # Searches bounded by a cost limit, raised until the cheapest arrival lies within
+        # it (then every node it could come from does, and the bounded search's tree is
+        # the full one's there), last without a bound.
+        chord_px = float(np.hypot(start_rc[0] - end_rc[0], start_rc[1] - end_rc[1]))
+        limits = [_LIMIT_PER_PX * f * (chord_px + reach_px) for f in _LIMIT_STEPS] + [np.inf]
+        cached = self._last_tree is not None and self._last_tree[0][:2] == key
+        if cached:  # the last tree from here first, then only wider bounds
+            have = self._last_tree[0][2]
+            limits = [have, *(lim for lim in limits if lim > have)]
+        for limit in limits:
+            if cached and self._last_tree[0][2] == limit:
+                dist, pred = self._last_tree[1]  # a route through apices starts where one did
+            else:
+                dist, pred, _ = dijkstra(self.graph, directed=True, indices=sources,
+                                         min_only=True, return_predecessors=True, limit=limit)
+                if len(headings) == N_HEADINGS:
+                    self._last_tree = ((*key, limit), (dist, pred))
+                    cached = True
+            per_pixel = dist.reshape(-1, N_HEADINGS)
+            finite = np.isfinite(per_pixel)
+            total = np.where(near[:, None] & finite, per_pixel + end_cost, np.inf)
+            if np.min(total) <= limit:
+                break
         if not np.any(finite[near]):
             reached = np.nonzero(finite.any(axis=1))[0]
             return None, int(reached[np.argmin(d_end[reached])]) if len(reached) else int(p0)
-        total = per_pixel + (d_end * self.cost_px)[:, None]
-        total = np.where(near[:, None] & finite, total, np.inf)
         node = int(np.argmin(total))
         chain = [node]
         while pred[chain[-1]] >= 0:

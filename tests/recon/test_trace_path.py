@@ -207,3 +207,35 @@ def test_route_distance_is_the_distance_to_the_nearest_route_pixel() -> None:
     rr, cc = np.mgrid[0:30, 0:40]
     brute = np.min(np.hypot(rr[..., None] - pixels[:, 0], cc[..., None] - pixels[:, 1]), axis=2)
     assert np.array_equal(dist, brute)
+
+
+def test_a_search_bounded_by_cost_gives_the_unbounded_route(monkeypatch) -> None:
+    """The route's searches are bounded at a few multiples of the straight distance,
+    raised until the cheapest arrival lies inside the bound: the route (a curved vessel
+    with a waypoint and a parallel neighbour) is the unbounded search's, whether the
+    first bound suffices or every bound is too small."""
+    import recon.trace_path as tp
+    from recon.centerline import compute_vesselness, snap_click
+
+    shape = (140, 220)
+    t = np.linspace(0.0, 1.0, 3000)
+    bend = np.column_stack([20 + 180 * t, 70 + 40 * np.sin(np.pi * t)])
+    other = segment((20, 40), (200, 40))
+    img = xray(path_length(shape, bend, 3.0) + path_length(shape, other, 2.5), "lin",
+               mu=0.06)
+    vmap = compute_vesselness(img)
+    clicks = np.array([snap_click(vmap, c)[0] for c in ([25.0, 72.0], [110.0, 110.0],
+                                                         [195.0, 72.0])])
+    routes = {}
+    for name, per_px, steps in (("unbounded", 2.0, ()), ("as set", tp._LIMIT_PER_PX,
+                                                          tp._LIMIT_STEPS),
+                                ("every bound too small", 1e-3, (1.0, 2.0))):
+        monkeypatch.setattr(tp, "_LIMIT_PER_PX", per_px)
+        monkeypatch.setattr(tp, "_LIMIT_STEPS", steps)
+        routes[name] = tp.minimal_route(vmap, clicks)
+    for name in ("as set", "every bound too small"):
+        np.testing.assert_array_equal(routes[name].path_px, routes["unbounded"].path_px)
+        np.testing.assert_array_equal(routes[name].click_index,
+                                      routes["unbounded"].click_index)
+    # on the bent vessel (the pixel route, within its 3 px lumen), not the neighbour
+    assert cKDTree(bend).query(routes["unbounded"].path_px)[0].max() < 4.0
