@@ -20,7 +20,10 @@ continuity: hopping from a small vessel onto a large neighbour costs) and
 ``c (1 + d J)`` per heading step turned, J the junction measure (a dark blob: a
 crossing's centre) near the pixel: inside a crossing the route goes straight.
 Solved with ``scipy.sparse.csgraph.dijkstra`` (Dijkstra 1959) from several
-start nodes (``min_only``).
+start nodes (``min_only``), each search first bounded in cost (its ``limit``) at a few
+multiples of the straight distance between the clicks and widened until the cheapest
+arrival lies inside the bound: every node that arrival's path could pass through is
+then inside it too, so the route is the unbounded search's.
 
 A loop that the route cut across at its crossing is followed round
 (:mod:`recon.route_loops`: :func:`loop_apices`, a ring of ridge touching the route
