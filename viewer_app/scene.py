@@ -285,9 +285,13 @@ def clear_results(scene: viser.SceneApi, views: Mapping[str, View]) -> None:
     for v in views.values():
         v.nodes.trace.points = np.zeros((0, 2, 3), np.float32)
         v.nodes.backproj.points = np.zeros((0, 2, 3), np.float32)
-    names = ["/model"] + [f"{overlay_name(k)}/{n}" for k in views
-                          for n in ("flagged", "flag_labels", "lesion", "lesion_labels",
-                                    "refusal", "refusal_label")]
+    _remove(scene, ["/model"] + [f"{overlay_name(k)}/{n}" for k in views
+                                 for n in ("flagged", "flag_labels", "lesion", "lesion_labels",
+                                           "refusal", "refusal_label")])
+
+
+def _remove(scene: viser.SceneApi, names: list[str]) -> None:
+    """Remove the scene nodes ``names`` (a name with no node is skipped)."""
     for name in names:
         try:
             scene.remove_by_name(name)
@@ -472,12 +476,8 @@ def draw_refusal(scene: viser.SceneApi, views: Mapping[str, View], error: object
     would help), labelled, on that view; ``error`` None removes it. An error that names
     no place changes nothing. Returns whether a place was drawn."""
     if error is None:
-        for key in views:
-            for name in ("refusal", "refusal_label"):
-                try:
-                    scene.remove_by_name(f"{overlay_name(key)}/{name}")
-                except Exception:
-                    log.debug("no refusal mark on %s", key, exc_info=True)
+        _remove(scene, [f"{overlay_name(key)}/{name}" for key in views
+                        for name in ("refusal", "refusal_label")])
         return False
     key = str(getattr(error, "view", None) or "").lower()
     near = getattr(error, "near_px", None)

@@ -416,15 +416,16 @@ def _run_varied(per_chain: int, seed: int) -> dict:
 
 
 def _format_varied(result: dict) -> str:
-    head = (f"{'chain':<22}{'cases':>6}{'traces':>7}{'success':>9}{'answered':>9}{'refused':>8}"
-            f"{'lost':>6}"
-            f"{'rms px':>8}{'p90 px':>8}{'r bias %':>9}{'r MAE px':>9}{'trace ms':>9}")
+    head = (f"{'chain':<22}{'cases':>6}{'traces':>7}{'success':>9}{'answered':>9}"
+            f"{'refused':>8}{'lost':>6}{'rms px':>8}{'p90 px':>8}{'r bias %':>9}"
+            f"{'r MAE px':>9}{'trace ms':>9}")
     lines = [f"centerline benchmark, varied suite ({result['cases_per_chain']} cases per chain, "
              f"seed {result['seed']})", head, "-" * len(head)]
 
     def line(name: str, f: dict) -> str:
         return (f"{name:<22}{f['cases']:>6}{f['traces']:>7}{f['trace_success']:>9.3f}"
-                f"{f['trace_success_answered']:>9.3f}{f['refused']:>8}{f['lost']:>6}{f['centerline_rms_px']:>8.3f}"
+                f"{f['trace_success_answered']:>9.3f}{f['refused']:>8}{f['lost']:>6}"
+                f"{f['centerline_rms_px']:>8.3f}"
                 f"{f['centerline_rms_px_p90']:>8.3f}{f['radius_bias_pct']:>+9.2f}"
                 f"{f['radius_mae_px']:>9.3f}{f['trace_ms']:>9.0f}")
 
