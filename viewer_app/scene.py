@@ -286,8 +286,8 @@ def clear_results(scene: viser.SceneApi, views: Mapping[str, View]) -> None:
         v.nodes.trace.points = np.zeros((0, 2, 3), np.float32)
         v.nodes.backproj.points = np.zeros((0, 2, 3), np.float32)
     _remove(scene, ["/model"] + [f"{overlay_name(k)}/{n}" for k in views
-                                 for n in ("flagged", "flag_labels", "lesion", "lesion_labels",
-                                           "refusal", "refusal_label")])
+                                 for n in ("flagged", "flag_labels", "lesion", "lesion_labels")])
+    draw_refusal(scene, views, None)
 
 
 def _remove(scene: viser.SceneApi, names: list[str]) -> None:
