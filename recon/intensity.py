@@ -172,6 +172,10 @@ def best_power(
 
 #: Blur factors (x the nominal blur) searched along a trace.
 BLUR_FACTORS = (0.6, 0.75, 0.9, 1.1, 1.35, 1.7, 2.2)
+#: The blur search goes past the grid's end while the residual still falls there, one
+#: step of the grid's end ratio at a time, at most this many steps, within these px.
+_BLUR_EXTRA_STEPS = 4
+_BLUR_RANGE_PX = (0.2, 5.0)
 
 
 def best_blur(
@@ -179,22 +183,46 @@ def best_blur(
     factors: tuple[float, ...] = BLUR_FACTORS,
 ) -> tuple[float, dict[float, float]]:
     """The model's Gaussian blur (px) minimising the profiles' residuals: a grid of
-    ``factors`` x ``nominal_px`` refined by a parabola in log blur.
+    ``factors`` x ``nominal_px``, refined by a parabola in log blur.
+
+    A minimum at the grid's first or last blur is not a minimum: the grid is extended
+    on that side (the end's ratio, at most :data:`_BLUR_EXTRA_STEPS` steps, within
+    :data:`_BLUR_RANGE_PX`) until the residual rises again, so that the parabola has
+    a point on each side.
 
     Parameters
     ----------
     rss_of_blur : blur (px) -> residual variances (M,) of M profile fits (inf: no fit).
     nominal_px : the expected blur.
 
-    Returns the blur and the aggregated residual at every grid blur.
+    Returns the blur and the aggregated residual at every blur evaluated.
     """
-    blurs = float(nominal_px) * np.asarray(factors, dtype=float)
-    rss = _aggregate([rss_of_blur(float(b)) for b in blurs])
-    table = dict(zip(blurs.tolist(), rss.tolist(), strict=True))
+    blurs = [float(nominal_px) * float(f) for f in factors]
+    per_blur = [rss_of_blur(b) for b in blurs]
+    rss = _aggregate(per_blur)
     if not np.all(np.isfinite(rss)):
-        return float(nominal_px), table
+        return float(nominal_px), dict(zip(blurs, rss.tolist(), strict=True))
+    lo_px, hi_px = _BLUR_RANGE_PX
+    for _ in range(_BLUR_EXTRA_STEPS):
+        k = int(np.argmin(rss))
+        if k == len(blurs) - 1 and blurs[-1] * blurs[-1] / blurs[-2] <= hi_px:
+            blurs.append(blurs[-1] * blurs[-1] / blurs[-2])
+            per_blur.append(rss_of_blur(blurs[-1]))
+        elif k == 0 and blurs[0] * blurs[0] / blurs[1] >= lo_px:
+            blurs.insert(0, blurs[0] * blurs[0] / blurs[1])
+            per_blur.insert(0, rss_of_blur(blurs[0]))
+        else:
+            break
+        extended = _aggregate(per_blur)
+        if not np.all(np.isfinite(extended)):  # the new blur fits too few profiles
+            k = len(blurs) - 1 if k > 0 else 0
+            blurs.pop(k)
+            per_blur.pop(k)
+            break
+        rss = extended
+    table = dict(zip(blurs, rss.tolist(), strict=True))
     k = int(np.argmin(rss))
-    log_b = np.log(blurs)
+    log_b = np.log(np.asarray(blurs))
     b = float(log_b[k])
     if 0 < k < len(blurs) - 1:
         f0, f1, f2 = rss[k - 1], rss[k], rss[k + 1]
