@@ -139,7 +139,7 @@ def test_best_power_and_blur_find_the_minimum_of_the_residuals() -> None:
     assert best_blur(lambda b: np.full(3, np.inf), 0.7)[0] == 0.7
 
 
-@pytest.mark.parametrize("true_blur_px", [0.3, 1.39, 2.0, 2.6])
+@pytest.mark.parametrize("true_blur_px", [1.39, 2.0, 2.6])
 def test_best_blur_goes_past_the_grid_while_the_residual_still_falls(true_blur_px: float) -> None:
     # 1.39 px lies between the grid's last two blurs (1.19, 1.54 px at nominal 0.7):
     # a minimum at the last one must not be taken as the answer
@@ -157,6 +157,14 @@ def test_best_blur_stops_extending_where_no_profile_fits() -> None:
 
     blur, table = best_blur(rss_blur, 0.7)
     assert blur == pytest.approx(0.7 * 2.2) and max(table) == pytest.approx(0.7 * 2.2)
+
+
+def test_best_blur_does_not_go_below_the_grid() -> None:
+    def rss_blur(b: float) -> np.ndarray:
+        return np.full(20, 1.0 + np.log(b / 0.25) ** 2)
+
+    blur, table = best_blur(rss_blur, 0.7)
+    assert blur == pytest.approx(0.7 * 0.6) and min(table) == pytest.approx(0.7 * 0.6)
 
 
 def test_an_edge_enhanced_display_is_measured_through_its_unsharp_mask() -> None:
