@@ -51,6 +51,7 @@ from scipy.spatial import cKDTree
 from recon.bench.common import (
     PRESET_CYCLE,
     VARIED_CASES_PER_CHAIN,
+    case_angiogram,
     check_suite,
     median,
     parallel_map,
@@ -216,12 +217,16 @@ def format_table(result: dict) -> str:
 def _evaluate_varied_view(image: np.ndarray, view: ViewGeometry, clicks_px: np.ndarray,
                           case, name: str, vmap: VesselnessMap) -> dict:
     """One trace of the varied suite, given the image's vesselness ``vmap``, against the
-    truth; raises what the tracing raises."""
-    tag = case.chain.tag if case.chain is not None else None
+    truth; raises what the tracing raises. The view is traced as the pipeline traces
+    each view (``recon.pipeline._trace``: the intensity mapping resolved once on the
+    whole image, then the trace); the pipeline's rule for a display-processed pair (one
+    mapping for both views) needs both views and is not in this figure."""
+    from recon.pipeline import _trace
+
     pixel_mm = view.pixel_mm_at_isocenter
+    angio = case_angiogram(image, view, name, case.chain)
     t1 = time.perf_counter()
-    cl = trace_segment(image, clicks_px, vesselness=vmap, view=name,
-                       pixel_mm=pixel_mm, relationship=tag)
+    cl = _trace(angio, np.asarray(clicks_px, dtype=float), vmap, name, pixel_mm, "auto")
     t2 = time.perf_counter()
     main_X, main_r = case.truth.vessels[0]
     dense, radius_true = _dense_truth(view, main_X, main_r)
