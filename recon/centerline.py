@@ -492,9 +492,11 @@ def trace_segment(
             rss_fn = make_rss(mapping.log_gain)
     power = POWER_OF[mapping.mapping]
     notes = []
-    # Display-processed: neither mapping is right, so the trace's profiles pick the power,
-    # and the display may be edge-enhanced (an unsharp mask, recon.profile_fit). Power,
-    # blur and enhancement shape the profile together: two rounds of each in turn.
+    # Display-processed: neither mapping is right, so the trace's profiles pick the power
+    # when this function resolves the mapping itself ("auto"; a given IntensityMapping,
+    # as the pipeline passes, keeps its power), and the display may be edge-enhanced (an
+    # unsharp mask, recon.profile_fit). Power, blur and enhancement shape the profile
+    # together: two rounds of each in turn.
     fit_power = is_display_processed(relationship) and \
         not isinstance(intensity, IntensityMapping) and intensity == "auto"
     fit_enhance = is_display_processed(relationship)
