@@ -28,8 +28,9 @@ def render(
     noise: float = 0.0,
     seed: int = 0,
     border_px: int = 0,
+    blur_px: float = 0.7,
 ) -> np.ndarray:
-    """Beer-Lambert tubes (centre (M, 2) dense, radius (M,)) blurred by sigma 0.7 px.
+    """Beer-Lambert tubes (centre (M, 2) dense, radius (M,)) blurred by sigma ``blur_px``.
 
     I = 1000 exp(-0.08 * chord), chord = 2 sqrt(r^2 - d^2) averaged over each pixel's
     area (4 x 4 rays: a detector integrates over its pixels); optional black border.
@@ -45,7 +46,7 @@ def render(
                 pix = np.column_stack([(cc + dx).ravel(), (rr + dy).ravel()])
                 d, i = tree.query(pix)
                 line += 2.0 * np.sqrt(np.clip(radius[i] ** 2 - d**2, 0.0, None)) / 16.0
-    img = ndi.gaussian_filter(1000.0 * np.exp(-0.08 * line.reshape(h, w)), 0.7)
+    img = ndi.gaussian_filter(1000.0 * np.exp(-0.08 * line.reshape(h, w)), blur_px)
     if noise:
         img = img + np.random.default_rng(seed).normal(0.0, noise, img.shape)
     if border_px:
@@ -331,6 +332,17 @@ def test_trace_records_its_intensity_mapping_and_blur() -> None:
     assert "set by the user" in fixed.intensity_reason
     with pytest.raises(ValueError, match="intensity must be one of"):
         trace_segment(img, [(15.0, 40.0), (145.0, 40.0)], intensity="gamma")
+
+
+def test_a_blur_beyond_the_search_grid_is_found_and_the_radius_kept() -> None:
+    # a blurred image intensifier: sigma 1.8 px (with the 4 x 4 pixel aperture, 1.82 px),
+    # above the blur grid's last value (2.2 x 0.7 = 1.54 px), where the search once stopped
+    line = segment((10, 40), (150, 40))
+    img = render((80, 160), [(line, np.full(len(line), 3.0))], noise=2.0, blur_px=1.8)
+    cl = trace_segment(img, [(15.0, 40.0), (145.0, 40.0)], relationship="LIN")
+    assert cl.blur_px == pytest.approx(np.hypot(1.8, np.sqrt(1 / 12)), rel=0.1)
+    inner = slice(len(cl.radius_px) // 5, -len(cl.radius_px) // 5)
+    assert np.median(cl.radius_px[inner]) == pytest.approx(3.0, rel=0.03)
 
 
 def test_robust_shift_gives_no_weight_to_fits_pulled_onto_a_neighbour() -> None:
