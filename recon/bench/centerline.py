@@ -19,7 +19,9 @@ Summary figures are medians over cases and both views.
 ``suite="varied"`` (:func:`recon.synth.suites.varied_cases`: every imaging
 chain x harder anatomy) reports per chain and overall, with each image
 passed as the chain's file would be (its PixelIntensityRelationship tag and
-the pixel size at the isocenter):
+the pixel size at the isocenter) and traced as the pipeline traces one view
+(the intensity mapping resolved on the whole image, then
+:func:`trace_segment`; trace_ms includes the mapping's resolution):
 
 - trace_success: the fraction of traces with no stretch of the projected
   true segment more than :data:`SUCCESS_PX` from the trace (the first and
