@@ -38,6 +38,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from recon.profile_fit import parabola_vertex_offset
+
 __all__ = [
     "IntensityMapping",
     "ValueScale",
@@ -248,10 +250,7 @@ def _refined_log_blur(rss_of_blur: Callable[[float], FloatArray], log_b: float,
     if not np.all(np.isfinite([f0, f1, f2])):
         return log_b
     table.update(zip(blurs, (float(f0), float(f1), float(f2)), strict=True))
-    den = f0 - 2.0 * f1 + f2
-    if not den > 0:
-        return log_b
-    return log_b + h * float(np.clip(0.5 * (f0 - f2) / den, -1.0, 1.0))
+    return log_b + h * float(parabola_vertex_offset(f0, f1, f2, limit=1.0))
 
 
 #: Edge-enhancement gains and sigmas (px) searched along a trace of a display-processed

@@ -59,13 +59,14 @@ _HALF_WIDTHS_PX = (5.0, 6.0, 7.0, 8.0, 9.5, 11.0, 13.0, 15.0, 17.5, 20.0, 23.0, 
 MIN_MAX_SHIFT_PX = 2.0
 
 
-def parabola_vertex_offset(f0: NDArray, f1: NDArray, f2: NDArray) -> NDArray:
-    """Offset in [-0.5, 0.5] samples of the vertex of the parabola through three
+def parabola_vertex_offset(f0: NDArray, f1: NDArray, f2: NDArray,
+                           limit: float = 0.5) -> NDArray:
+    """Offset in [-limit, limit] samples of the vertex of the parabola through three
     equally spaced values around a discrete minimum (0 where it is not convex)."""
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
         denom = f0 - 2.0 * f1 + f2
         delta = np.where(np.isfinite(denom) & (denom > 0), 0.5 * (f0 - f2) / denom, 0.0)
-        return np.minimum(np.maximum(delta, -0.5), 0.5)  # never NaN: finite / positive
+        return np.minimum(np.maximum(delta, -limit), limit)  # never NaN: finite / positive
 
 
 def half_width_for(radius_px: float) -> float:
