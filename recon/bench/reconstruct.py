@@ -5,7 +5,11 @@ preset, several seeds) the full `reconstruct_pair` runs from the rendered
 images, the header geometry and the noisy clicks, and its results are
 compared with the truth: 3D centerline error, MLD, % diameter stenosis,
 segment length, mesh volume, and the true-pose error of calibrated view B
-(:func:`recon.bench.common.pose_error`).
+(:func:`recon.bench.common.pose_error`). The mesh is closed by a cap on each end
+(:mod:`recon.surface`), so its volume is compared with the true segment closed the
+same way (:func:`closed_truth_volume_mm3`); the lumen volume between the ends (the
+sections' areas integrated along the centerline, no caps) is compared with the true
+segment's as ``section_volume_error_pct``.
 
 ``suite="varied"`` (:func:`recon.synth.suites.varied_cases`: every imaging
 chain x harder anatomy; each image passed as an in-memory angiogram with
@@ -139,8 +143,23 @@ def evaluate_case(case: PhantomCase, options: ReconstructionOptions, *,
     return row
 
 
+def closed_truth_volume_mm3(truth) -> float:
+    """The true segment's volume closed as the mesh is closed: its lumen volume
+    (pi * integral r^2 ds) plus a hemisphere on each end section, the half-ellipsoid
+    caps of :mod:`recon.surface` for a round lumen (mm^3)."""
+    r = truth.segment_radius_mm
+    return float(truth.segment_volume_mm3 + 2.0 / 3.0 * np.pi * (r[0] ** 3 + r[-1] ** 3))
+
+
+def section_volume_mm3(rec) -> float:
+    """The reconstruction's lumen volume between its ends, without the caps: the
+    integral of the elliptic sections' areas along the 3D centerline (mm^3)."""
+    return float(np.trapezoid(rec.surface.sections.area_mm2, rec.centerline_3d.s_mm))
+
+
 def _case_row(case: PhantomCase, rec, wall_ms: float) -> dict:
     truth = case.truth
+    closed_volume = closed_truth_volume_mm3(truth)
     err = polyline_distance_mm(rec.centerline_3d.X_world, truth.segment_X_world)
     m = rec.measurements
     rms_free, scale = scale_free_rms_mm(rec.centerline_3d.X_world, truth.segment_X_world,
@@ -168,8 +187,9 @@ def _case_row(case: PhantomCase, rec, wall_ms: float) -> dict:
         "lesion_length_mm": m.lesion_length_mm,
         "lesion_length_true_mm": truth.stenosis_length_mm,
         "volume_error_pct": 100.0
-        * (float(rec.surface.mesh.volume) - truth.segment_volume_mm3)
-        / truth.segment_volume_mm3,
+        * (float(rec.surface.mesh.volume) - closed_volume) / closed_volume,
+        "section_volume_error_pct": 100.0
+        * (section_volume_mm3(rec) - truth.segment_volume_mm3) / truth.segment_volume_mm3,
         "watertight": bool(rec.surface.mesh.is_watertight),
         "pose_rotation_error_deg_before": rot_before,
         "pose_rotation_error_deg_after": rot_after,
@@ -257,6 +277,7 @@ def _run_regular(cases: int | None, seed: int, workers: int | None = None) -> di
         "abs_diameter_stenosis_error_pct": med("diameter_stenosis_error_pct", absolute=True),
         "abs_length_error_pct": med("length_error_pct", absolute=True),
         "abs_volume_error_pct": med("volume_error_pct", absolute=True),
+        "abs_section_volume_error_pct": med("section_volume_error_pct", absolute=True),
         "max_abs_mld_error_mm": float(max(abs(r["mld_error_mm"]) for r in rows)),
         "max_abs_diameter_stenosis_error_pct": float(
             max(abs(r["diameter_stenosis_error_pct"]) for r in rows)
@@ -314,6 +335,8 @@ def format_table(result: dict) -> str:
         f"(max {result['max_abs_diameter_stenosis_error_pct']:.1f})",
         f"median |length error|           {result['abs_length_error_pct']:.2f} %",
         f"median |mesh volume error|      {result['abs_volume_error_pct']:.1f} %",
+        f"median |lumen volume error|     {result['abs_section_volume_error_pct']:.1f} % "
+        "(sections between the ends, no caps)",
         f"watertight meshes               {result['watertight_rate'] * 100:.0f} %",
         f"pose better than header         {result['pose_improved_rate'] * 100:.0f} %",
         f"median pipeline time            {result['median_pipeline_ms']:.0f} ms "
@@ -454,6 +477,7 @@ def _figures(rows: list[dict], failures: list[dict]) -> dict:
         "abs_diameter_stenosis_error_pct": median(col("diameter_stenosis_error_pct")),
         "abs_length_error_pct": median(col("length_error_pct")),
         "abs_volume_error_pct": median(col("volume_error_pct")),
+        "abs_section_volume_error_pct": median(col("section_volume_error_pct")),
         "centerline_3d_rms_rigid_mm": median(rigid),
         "max_centerline_3d_rms_rigid_mm": percentile(rigid, 100),
         "cases_above_rigid_limit": sum(x > RIGID_RMS_LIMIT_MM for x in rigid),
