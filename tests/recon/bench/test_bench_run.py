@@ -4,11 +4,16 @@ from __future__ import annotations
 
 import importlib
 import inspect
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from support import centerline_3d, straight
 
 from recon.bench.common import pose_error
+from recon.bench.reconstruct import closed_truth_volume_mm3, section_volume_mm3
+from recon.geometry import ViewGeometry
+from recon.surface import build_surface
 from recon.synth import make_phantom
 
 BENCHES = ("centerline", "calibration", "matching", "reconstruct", "speed", "intervals",
@@ -51,14 +56,6 @@ def test_pose_error_of_the_header_and_of_the_truth() -> None:
 def test_the_mesh_volume_is_judged_against_the_truth_closed_the_same_way() -> None:
     """The mesh of a known straight tube carries a cap on each end: the bench's closed
     true volume matches it, and the sections' volume matches the tube without caps."""
-    from types import SimpleNamespace
-
-    from support import centerline_3d, straight
-
-    from recon.bench.reconstruct import closed_truth_volume_mm3, section_volume_mm3
-    from recon.geometry import ViewGeometry
-    from recon.surface import build_surface
-
     r, length = 1.5, 40.0
     cl = centerline_3d(straight(length=length), r)
     view_a = ViewGeometry(-30.0, 0.0, 1000.0, 750.0, (0.39, 0.39), 512, 512)
