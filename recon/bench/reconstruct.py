@@ -52,8 +52,8 @@ from recon.bench.common import (
     varied_rows,
 )
 from recon.geometry import ViewGeometry
-from recon.pipeline import ReconstructionOptions, reconstruct_pair
-from recon.synth import PhantomCase, make_phantom
+from recon.pipeline import Reconstruction, ReconstructionOptions, reconstruct_pair
+from recon.synth import PhantomCase, PhantomTruth, make_phantom
 from recon.types import Angiogram
 
 CASES = 8  # phantom cases when run(cases=None)
@@ -143,7 +143,7 @@ def evaluate_case(case: PhantomCase, options: ReconstructionOptions, *,
     return row
 
 
-def closed_truth_volume_mm3(truth) -> float:
+def closed_truth_volume_mm3(truth: PhantomTruth) -> float:
     """The true segment's volume closed as the mesh is closed: its lumen volume
     (pi * integral r^2 ds) plus a hemisphere on each end section, the half-ellipsoid
     caps of :mod:`recon.surface` for a round lumen (mm^3)."""
@@ -151,7 +151,7 @@ def closed_truth_volume_mm3(truth) -> float:
     return float(truth.segment_volume_mm3 + 2.0 / 3.0 * np.pi * (r[0] ** 3 + r[-1] ** 3))
 
 
-def section_volume_mm3(rec) -> float:
+def section_volume_mm3(rec: Reconstruction) -> float:
     """The reconstruction's lumen volume between its ends, without the caps: the
     integral of the elliptic sections' areas along the 3D centerline (mm^3)."""
     return float(np.trapezoid(rec.surface.sections.area_mm2, rec.centerline_3d.s_mm))
