@@ -157,9 +157,13 @@ def section_volume_mm3(rec: Reconstruction) -> float:
     return float(np.trapezoid(rec.surface.sections.area_mm2, rec.centerline_3d.s_mm))
 
 
+def _error_pct(value: float, true: float) -> float:
+    """Signed error of ``value`` in per cent of ``true``."""
+    return 100.0 * (value - true) / true
+
+
 def _case_row(case: PhantomCase, rec, wall_ms: float) -> dict:
     truth = case.truth
-    closed_volume = closed_truth_volume_mm3(truth)
     err = polyline_distance_mm(rec.centerline_3d.X_world, truth.segment_X_world)
     m = rec.measurements
     rms_free, scale = scale_free_rms_mm(rec.centerline_3d.X_world, truth.segment_X_world,
@@ -183,13 +187,12 @@ def _case_row(case: PhantomCase, rec, wall_ms: float) -> dict:
         "diameter_stenosis_error_pct": m.diameter_stenosis_pct - truth.stenosis_diameter_pct,
         "length_mm": m.segment_length_mm,
         "length_true_mm": true_length,
-        "length_error_pct": 100.0 * (m.segment_length_mm - true_length) / true_length,
+        "length_error_pct": _error_pct(m.segment_length_mm, true_length),
         "lesion_length_mm": m.lesion_length_mm,
         "lesion_length_true_mm": truth.stenosis_length_mm,
-        "volume_error_pct": 100.0
-        * (float(rec.surface.mesh.volume) - closed_volume) / closed_volume,
-        "section_volume_error_pct": 100.0
-        * (section_volume_mm3(rec) - truth.segment_volume_mm3) / truth.segment_volume_mm3,
+        "volume_error_pct": _error_pct(float(rec.surface.mesh.volume),
+                                      closed_truth_volume_mm3(truth)),
+        "section_volume_error_pct": _error_pct(section_volume_mm3(rec), truth.segment_volume_mm3),
         "watertight": bool(rec.surface.mesh.is_watertight),
         "pose_rotation_error_deg_before": rot_before,
         "pose_rotation_error_deg_after": rot_after,
