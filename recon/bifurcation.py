@@ -30,6 +30,11 @@ EuroIntervention, for the phantom validation of such a tool):
   proximally) and the side branch.
 - Medina class: (proximal main, distal main, side branch), 1 where that
   segment's %DS >= 50, else 0.
+
+:func:`sharpest_turn_deg` measures how sharply a centerline turns near its
+start (the largest angle between successive chords of
+:data:`TURN_CHORD_MM`): a join that bends a branch more than the vessel
+itself turns shows there.
 """
 
 from __future__ import annotations
@@ -55,12 +60,15 @@ __all__ = [
     "QCA_SEGMENT_MM",
     "DIRECTION_WINDOW_MM",
     "MEDINA_DS_PCT",
+    "TURN_CHORD_MM",
+    "sharpest_turn_deg",
 ]
 
 QCA_SEGMENT_MM = 10.0  # length of each of the three bifurcation segments
 DIRECTION_WINDOW_MM = (0.0, 4.0)  # direction fit window beyond each segment's start
 MEDINA_DS_PCT = 50.0  # a Medina 1: diameter stenosis at least this
 _MIN_BLEND_MM = 1.0
+TURN_CHORD_MM = 1.0  # chord length of sharpest_turn_deg
 
 
 def nearest_on_polyline(X_world: FloatArray, point: ArrayLike) -> tuple[FloatArray, float, int]:
@@ -156,6 +164,22 @@ def direction_away(X_world: FloatArray, s_mm: FloatArray, s_from: float, s_to: f
     if axis @ (X_world[i_to] - X_world[i_from]) < 0:
         axis = -axis
     return axis / np.linalg.norm(axis)
+
+
+def sharpest_turn_deg(X_world: FloatArray, s_to_mm: float,
+                      chord_mm: float = TURN_CHORD_MM) -> float:
+    """Largest angle (deg) between successive chords of ``chord_mm`` along X_world (N, 3)
+    from its start to arc length ``s_to_mm`` (or its end); 0 with fewer than two chords."""
+    X = np.asarray(X_world, dtype=float)
+    s = arclength(X)
+    grid = np.arange(0.0, min(float(s_to_mm), float(s[-1])) + 1e-9, chord_mm)
+    if len(grid) < 3:
+        return 0.0
+    P = np.column_stack([np.interp(grid, s, X[:, k]) for k in range(3)])  # (G, 3)
+    chords = np.diff(P, axis=0)
+    chords /= np.maximum(np.linalg.norm(chords, axis=1, keepdims=True), 1e-12)
+    cosines = np.einsum("ij,ij->i", chords[:-1], chords[1:])
+    return float(np.degrees(np.arccos(np.clip(cosines.min(), -1.0, 1.0))))
 
 
 def _angle_deg(u: FloatArray, v: FloatArray) -> float:

@@ -286,12 +286,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=_number(int, 0, 2**32 - 1), default=0)
     p.add_argument(
         "--suite",
-        choices=("regular", "varied", "tree"),
+        choices=("regular", "varied", "tree", "tree-varied"),
         default="regular",
         help="regular: the plain phantom (default); varied: every imaging chain (detector, "
         "mapping, blur, glare, noise, background, bit depth) x harder anatomy (centerline "
-        "and reconstruct only); tree: phantom trees with bifurcation lesions, every branch "
-        "reconstructed (reconstruct only)",
+        "and reconstruct only); tree: phantom trees with bifurcation lesions at Table-1 and "
+        "random geometries, every branch reconstructed (reconstruct only); tree-varied: the "
+        "same trees rendered through the imaging chains",
     )
     p.add_argument(
         "--jitter",
@@ -572,8 +573,9 @@ def cmd_view(args: argparse.Namespace) -> int:
 def cmd_bench(args: argparse.Namespace) -> int:
     module = importlib.import_module(f"recon.bench.{args.name.replace('-', '_')}")
     extra = {}
-    if args.suite == "tree" and args.name != "reconstruct":
-        print(f"coronary3d: error: bench {args.name} has no --suite tree (reconstruct has)",
+    if args.suite.startswith("tree") and args.name != "reconstruct":
+        print(f"coronary3d: error: bench {args.name} has no --suite {args.suite} "
+              "(reconstruct has)",
               file=sys.stderr)
         return EXIT_USER_ERROR
     suites = ("centerline", "reconstruct", "calibration-modes")

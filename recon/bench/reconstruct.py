@@ -20,8 +20,9 @@ centerline RMS after a rigid (rotation + translation, not scaled)
 alignment to the truth (median and max), and the failed cases with their
 one-line reason.
 
-``suite="tree"``: phantom trees with bifurcation lesions, every branch in
-one reconstruction (:mod:`recon.bench.tree`).
+``suite="tree"`` and ``"tree-varied"``: phantom trees with bifurcation lesions,
+every branch in one reconstruction, the second through the imaging chains
+(:mod:`recon.bench.tree`).
 
 ``jitter=N`` adds click stability: per case, N more runs with every click
 moved uniformly within a disc of :data:`JITTER_PX`; the spread (max - min
@@ -219,10 +220,10 @@ def run(cases: int | None = None, seed: int = 0, suite: str = "regular",
     local Dask cluster of that many processes (the engine of `coronary3d
     batch`); None runs them one after another in this process.
     """
-    if suite == "tree":  # phantom trees with bifurcation lesions (recon.bench.tree)
+    if suite in ("tree", "tree-varied"):  # phantom trees with bifurcation lesions
         from recon.bench.tree import run_tree
 
-        return run_tree(cases, seed)
+        return run_tree(cases, seed, suite)
     check_suite(suite)
     if jitter < 0:
         raise ValueError(f"jitter must be >= 0, got {jitter}")
@@ -304,7 +305,7 @@ def format_table(result: dict) -> str:
     """Plain-text table of a :func:`run` result."""
     if result.get("suite") == "varied":
         return _format_varied(result)
-    if result.get("suite") == "tree":
+    if result.get("suite") in ("tree", "tree-varied"):
         from recon.bench.tree import format_tree
 
         return format_tree(result)

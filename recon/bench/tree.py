@@ -1,10 +1,16 @@
 """`coronary3d bench reconstruct --suite tree`: phantom trees with bifurcation lesions.
 
-Case k is preset ``PRESET_CYCLE[k % 4]`` (the paper's Table 1 geometries
-and the static pair) with seed ``seed + k`` and lesion
-``TREE_LESIONS[k % 3]`` (:func:`recon.synth.tree.make_tree_case`: the main
-lesion on a bifurcation's shoulder, a 50 % ostial side-branch lesion, or
-both at one bifurcation); every side branch leaving the main segment is
+Case k has seed ``seed + k``, lesion ``TREE_LESIONS[k % 3]``
+(:func:`recon.synth.tree.make_tree_case`: the main lesion on a
+bifurcation's shoulder, an ostial side-branch lesion, or both at one
+bifurcation; diameter stenosis drawn from :data:`STENOSIS_PCT_RANGE`)
+and, as the varied suite takes them, a Table-1 geometry
+(``TABLE1_CYCLE[(k // 2) % 4]``: the paper's Table 1 and the static pair)
+for even k and a random C-arm pair
+(:func:`recon.synth.suites.random_geometry`) for odd k. The "tree" suite
+renders with the plain renderer; "tree-varied" renders case k with the
+imaging chain ``CHAINS[(k // 2) % 6]`` (each chain one Table-1 and one
+random pair in 12 cases). Every side branch leaving the main segment is
 clicked as a branch. :func:`recon.tree.reconstruct_tree` runs on the
 rendered images and header geometry, and is compared with the truth:
 
@@ -16,8 +22,14 @@ rendered images and header geometry, and is compared with the truth:
   segment and the narrowed side-branch ostia); a healthy branch's "MLD" is
   only its thinnest, usually distal, stretch, reported apart
   (``mld_err_all_*``, every segment);
-- per bifurcation: the bifurcation angle, with the definitions of
-  :mod:`recon.bifurcation` applied to the true centerlines;
+- per bifurcation: the bifurcation angle, the three segments' %DS and the
+  Medina class, with the definitions of :mod:`recon.bifurcation` applied to
+  the true centerlines, diameters and undiseased tapers (the main vessel
+  within the clicked segment, the branch up to its distal click); and the
+  branch's sharpest turn (:func:`recon.bifurcation.sharpest_turn_deg`) from
+  the join to :data:`JOIN_TURN_BEYOND_MM` past the carina, against the true
+  branch's over the same stretch (a join that kinks the branch shows as an
+  excess);
 - the pose of view B (mean displacement over the tree's true points, as
   the regular suite: better than the header when smaller), and the same
   for the tree's calibration with every branch's matched points added
@@ -34,18 +46,35 @@ import time
 
 import numpy as np
 
-from recon.bench.common import PRESET_CYCLE, pose_error
-from recon.bifurcation import bifurcation_angles_deg, carina_s_mm
+from recon.bench.common import parallel_map, pose_error
+from recon.bifurcation import (
+    MEDINA_DS_PCT,
+    BifurcationQCA,
+    bifurcation_angles_deg,
+    bifurcation_qca,
+    carina_s_mm,
+    sharpest_turn_deg,
+)
 from recon.errors import CoronaryError
 from recon.pipeline import ReconstructionOptions
+from recon.synth.chains import CHAINS
+from recon.synth.presets import PhantomPreset
+from recon.synth.suites import TABLE1_CYCLE, random_geometry
 from recon.synth.tree import SAMPLE_STEP_MM, TREE_LESIONS, TreeCase, make_tree_case
 from recon.tree import reconstruct_tree, tree_calibration
+from recon.types import arclength
 
-__all__ = ["run_tree", "format_tree", "CASES"]
+__all__ = ["run_tree", "format_tree", "tree_jobs", "true_bifurcation", "CASES", "TREE_SUITES"]
 
 CASES = 12  # tree cases when cases is None
-STENOSIS_PCT = 50.0
+#: Each case's lesions narrow the diameter by a percentage drawn from this range (the
+#: main lesion and the ostial one alike), so Medina's 50 % threshold falls inside it.
+STENOSIS_PCT_RANGE = (35.0, 70.0)
+MEDINA_NEAR_PCT = 5.0  # a true %DS this close to Medina's threshold is a borderline class
 LESION_FRACTION = 0.75  # a segment "with a lesion": true MLD below this x its reference
+JOIN_TURN_BEYOND_MM = 2.0  # the join's turn is measured up to this far past the carina
+TREE_SUITES = ("tree", "tree-varied")
+BIFURCATION_SEGMENTS = ("proximal_main", "distal_main", "side_branch")
 
 
 def _branch_truth(tc: TreeCase, j: int) -> tuple[float, float]:
@@ -63,8 +92,34 @@ def _branch_truth(tc: TreeCase, j: int) -> tuple[float, float]:
     return float(2 * r[i]), float(2 * taper[i])
 
 
-def _case(preset: str, seed: int, lesion: str) -> dict:
-    tc = make_tree_case(preset, seed, lesion, stenosis_pct=STENOSIS_PCT)
+def _taper(r_mm: np.ndarray) -> np.ndarray:
+    """The undiseased (linear) taper (N,) of a radius profile sampled every SAMPLE_STEP_MM:
+    a phantom lesion is a bump that vanishes at the vessel's ends."""
+    t = np.linspace(0.0, 1.0, len(r_mm))
+    return r_mm[0] + (r_mm[-1] - r_mm[0]) * t
+
+
+def true_bifurcation(tc: TreeCase, j: int) -> BifurcationQCA:
+    """Bifurcation QCA (:func:`recon.bifurcation.bifurcation_qca`) of segment j's (j >= 1)
+    bifurcation on the true centerlines, diameters and tapers: the main vessel within
+    the clicked segment, the branch up to its distal click."""
+    truth = tc.case.truth
+    main_X, main_r = truth.vessels[0]
+    i0 = int(round(truth.segment_start_s_mm / SAMPLE_STEP_MM))
+    rows = slice(i0, i0 + len(truth.segment_X_world))
+    p_X, p_r, p_ref = main_X[rows], main_r[rows], _taper(main_r)[rows]
+    b_X, b_r = truth.vessels[tc.vessels[j]]
+    keep = np.arange(len(b_X)) * SAMPLE_STEP_MM <= tc.end_s_mm[j] + 1e-9
+    seg = tc.seeds.segments[j]
+    return bifurcation_qca(
+        seg.bifurcation, seg.parent, seg.name,
+        p_X, (arclength(p_X), 2 * p_r, 2 * p_ref),
+        b_X[keep], (arclength(b_X[keep]), 2 * b_r[keep], 2 * _taper(b_r)[keep]), 0.0)
+
+
+def _case(job: tuple) -> dict:
+    preset, seed, lesion, chain, stenosis_pct = job
+    tc = make_tree_case(preset, seed, lesion, stenosis_pct=stenosis_pct, chain=chain)
     from recon.bench.reconstruct import case_angiograms
 
     a, b = case_angiograms(tc.case)
@@ -88,13 +143,22 @@ def _case(preset: str, seed: int, lesion: str) -> dict:
     main_X, main_r = truth.vessels[0]
     for bq in rec.bifurcations:
         j = tc.seeds.segment_index(bq.branch)
-        true_angle, true_prox, _ = bifurcation_angles_deg(main_X, main_r,
-                                                          truth.vessels[tc.vessels[j]][0])
+        true_X = truth.vessels[tc.vessels[j]][0]
+        true_angle, true_prox, info = bifurcation_angles_deg(main_X, main_r, true_X)
+        tq = true_bifurcation(tc, j)
+        turn = sharpest_turn_deg(rec.branches[j].centerline_3d.X_world,
+                                 bq.carina_s_mm + JOIN_TURN_BEYOND_MM)
+        turn_true = sharpest_turn_deg(true_X, info["carina_s_mm"] + JOIN_TURN_BEYOND_MM)
         bifurcations.append({
             "name": bq.name, "angle_deg": bq.bifurcation_angle_deg, "angle_true_deg": true_angle,
             "angle_error_deg": bq.bifurcation_angle_deg - true_angle,
             "proximal_angle_error_deg": bq.proximal_angle_deg - true_prox,
-            "gap_mm": bq.gap_mm, "join_shift_mm": bq.join_shift_mm, "medina": bq.medina,
+            "gap_mm": bq.gap_mm, "join_shift_mm": bq.join_shift_mm,
+            "medina": bq.medina, "medina_true": tq.medina,
+            "ds_pct": {k: getattr(bq, k).diameter_stenosis_pct for k in BIFURCATION_SEGMENTS},
+            "ds_true_pct": {k: getattr(tq, k).diameter_stenosis_pct
+                            for k in BIFURCATION_SEGMENTS},
+            "join_turn_deg": turn, "join_turn_true_deg": turn_true,
         })
     X_tree = np.vstack([truth.segment_X_world] + [truth.vessels[v][0] for v in tc.vessels[1:]])
     _, before = pose_error(tc.case.view_b_nominal, tc.case.view_b_true, X_tree)
@@ -106,7 +170,9 @@ def _case(preset: str, seed: int, lesion: str) -> dict:
     _, after_matched = pose_error(matched.view_b, tc.case.view_b_true, X_tree)
     mesh = rec.tree_surface.mesh
     return {
-        "preset": preset, "seed": seed, "lesion": lesion, "segments": segments,
+        "preset": preset if isinstance(preset, str) else preset.name,
+        "chain": chain, "seed": seed, "lesion": lesion, "stenosis_pct": stenosis_pct,
+        "segments": segments,
         "bifurcations": bifurcations,
         "pose_displacement_mm_before": before, "pose_displacement_mm_after": after,
         "pose_displacement_mm_after_matched_points": after_matched,
@@ -116,20 +182,57 @@ def _case(preset: str, seed: int, lesion: str) -> dict:
     }
 
 
-def run_tree(cases: int | None = None, seed: int = 0) -> dict:
-    """Run the tree suite (module docstring); the figures, the rows and the failures."""
-    cases = CASES if cases is None else cases
-    rows, failed = [], []
+def tree_jobs(cases: int, seed: int = 0, suite: str = "tree") -> list[tuple]:
+    """The suite's cases (module docstring): (preset or random pair, seed, lesion, chain,
+    diameter stenosis %)."""
+    if suite not in TREE_SUITES:
+        raise ValueError(f"unknown tree suite {suite!r} (use one of {', '.join(TREE_SUITES)})")
+    chains = list(CHAINS)
+    jobs = []
     for k in range(cases):
-        preset = PRESET_CYCLE[k % len(PRESET_CYCLE)]
-        lesion = TREE_LESIONS[k % len(TREE_LESIONS)]
-        try:
-            rows.append(_case(preset, seed + k, lesion))
-        except (CoronaryError, ValueError) as err:
-            reason = " ".join(str(err).split())
-            failed.append({"preset": preset, "seed": seed + k, "lesion": lesion,
-                           "error": reason})
-    return summarise(rows, failed)
+        preset: str | PhantomPreset
+        if k % 2 == 0:
+            preset = TABLE1_CYCLE[(k // 2) % len(TABLE1_CYCLE)]
+        else:
+            preset = random_geometry(np.random.default_rng([int(seed), k, 15]), f"random-{k}")
+        chain = chains[(k // 2) % len(chains)] if suite == "tree-varied" else None
+        pct = round(float(np.random.default_rng([int(seed), k, 16]).uniform(
+            *STENOSIS_PCT_RANGE)), 1)
+        jobs.append((preset, seed + k, TREE_LESIONS[k % len(TREE_LESIONS)], chain, pct))
+    return jobs
+
+
+def _case_or_failure(job: tuple) -> tuple[dict | None, dict | None]:
+    """(row, None) or (None, failure with its one-line reason) of one case (in a worker)."""
+    try:
+        return _case(job), None
+    except (CoronaryError, ValueError) as err:
+        preset, seed, lesion, chain, pct = job
+        name = preset if isinstance(preset, str) else preset.name
+        return None, {"preset": name, "chain": chain, "seed": seed, "lesion": lesion,
+                      "stenosis_pct": pct, "error": " ".join(str(err).split())}
+
+
+def run_tree(cases: int | None = None, seed: int = 0, suite: str = "tree") -> dict:
+    """Run a tree suite (module docstring); the figures, the rows and the failures.
+
+    The cases run in up to two worker processes (:func:`recon.bench.common.parallel_map`).
+    """
+    jobs = tree_jobs(CASES if cases is None else cases, seed, suite)
+    outcomes = parallel_map(_case_or_failure, jobs)
+    result = summarise([r for r, _ in outcomes if r is not None],
+                       [f for _, f in outcomes if f is not None])
+    result["suite"] = suite
+    return result
+
+
+def _borderline_miss(bif: dict) -> bool:
+    """Whether a bifurcation's Medina class differs from the truth's only in segments whose
+    true %DS lies within :data:`MEDINA_NEAR_PCT` of the threshold."""
+    wrong = [k for k, a, b in zip(BIFURCATION_SEGMENTS, bif["medina"].split(","),
+                                  bif["medina_true"].split(","), strict=True) if a != b]
+    return bool(wrong) and all(
+        abs(bif["ds_true_pct"][k] - MEDINA_DS_PCT) <= MEDINA_NEAR_PCT for k in wrong)
 
 
 def summarise(rows: list[dict], failed: list[dict]) -> dict:
@@ -140,7 +243,12 @@ def summarise(rows: list[dict], failed: list[dict]) -> dict:
     mld = np.array([s["mld_error_mm"] for s in lesion], dtype=float)
     ref = np.array([s["ref_diam_error_mm"] for s in lesion], dtype=float)
     ang = np.array([b["angle_error_deg"] for r in rows for b in r["bifurcations"]], dtype=float)
-    gaps = [b["gap_mm"] for r in rows for b in r["bifurcations"]]
+    bifs = [b for r in rows for b in r["bifurcations"]]
+    gaps = [b["gap_mm"] for b in bifs]
+    ds_err = {k: np.array([b["ds_pct"][k] - b["ds_true_pct"][k] for b in bifs], dtype=float)
+              for k in BIFURCATION_SEGMENTS}
+    turn_excess = np.array([b["join_turn_deg"] - b["join_turn_true_deg"] for b in bifs],
+                           dtype=float)
 
     def mean(v: np.ndarray) -> float | None:
         return float(np.mean(v)) if len(v) else None
@@ -163,6 +271,14 @@ def summarise(rows: list[dict], failed: list[dict]) -> dict:
         "bifurcation_angle_err_mean_deg": mean(ang),
         "bifurcation_angle_err_sd_deg": sd(ang),
         "max_gap_mm": float(max(gaps)) if gaps else None,
+        "medina_agreement": float(np.mean([b["medina"] == b["medina_true"] for b in bifs]))
+        if bifs else None,
+        "medina_disagreements_borderline": sum(_borderline_miss(b) for b in bifs),
+        "medina_disagreements": sum(b["medina"] != b["medina_true"] for b in bifs),
+        "bifurcation_ds_err_pct": {k: {"mean": mean(v), "sd": sd(v)} for k, v in ds_err.items()},
+        "join_turn_excess_deg": {
+            "median": float(np.median(turn_excess)) if len(bifs) else None,
+            "max": float(np.max(turn_excess)) if len(bifs) else None},
         "pose_better_than_header": float(np.mean(
             [r["pose_displacement_mm_after"] < r["pose_displacement_mm_before"] for r in rows]))
         if rows else None,
@@ -175,9 +291,14 @@ def summarise(rows: list[dict], failed: list[dict]) -> dict:
         "watertight_single_component": float(np.mean(
             [r["watertight"] and r["components"] == 1 for r in rows])) if rows else None,
         "failed": failed,
-        "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
+        "peak_rss_mb": max(resource.getrusage(who).ru_maxrss for who in (
+            resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN)) / 1024.0,  # one process's
         "rows": rows,
     }
+
+
+def _pm(v: float | None, fmt: str = "{:+.2f}") -> str:
+    return "-" if v is None else fmt.format(v)
 
 
 def format_tree(result: dict) -> str:
@@ -186,8 +307,10 @@ def format_tree(result: dict) -> str:
         v = result.get(key)
         return "-" if v is None else fmt.format(v)
 
+    turn = result["join_turn_excess_deg"]
     lines = [
-        f"Tree suite: {result['cases']} cases ({result['segments']} segments, "
+        f"Tree suite ({result.get('suite', 'tree')}): {result['cases']} cases "
+        f"({result['segments']} segments, "
         f"{result['lesion_segments']} with a lesion, {result['bifurcation_count']} "
         f"bifurcations), {len(result['failed'])} failed",
         f"MLD error mean / SD (mm), lesions   {f('mld_err_mean_mm')} / "
@@ -199,6 +322,14 @@ def format_tree(result: dict) -> str:
         f"bifurcation angle error mean / SD   {f('bifurcation_angle_err_mean_deg', '{:+.2f}')} / "
         f"{f('bifurcation_angle_err_sd_deg', '{:.2f}')} deg",
         f"largest gap at a bifurcation (mm)   {f('max_gap_mm', '{:.3f}')}",
+        f"Medina class as the truth's         {f('medina_agreement', '{:.2f}')} "
+        f"({result['medina_disagreements']} differ, {result['medina_disagreements_borderline']}"
+        f" only where the true %DS is within {MEDINA_NEAR_PCT:.0f} of {MEDINA_DS_PCT:.0f})",
+        *[f"  %DS error mean / SD, {k.replace('_', ' '):<13} "
+          f"{_pm(v['mean'])} / {_pm(v['sd'], '{:.2f}')}"
+          for k, v in result["bifurcation_ds_err_pct"].items()],
+        f"join: sharpest turn beyond truth's  median "
+        f"{_pm(turn['median'])}, max {_pm(turn['max'])} deg",
         f"pose better than header             {f('pose_better_than_header', '{:.2f}')} "
         f"(with every branch's matched points: "
         f"{f('pose_better_than_header_with_matched_points', '{:.2f}')})",
@@ -206,5 +337,7 @@ def format_tree(result: dict) -> str:
         f"peak memory (MB)                    {f('peak_rss_mb', '{:.0f}')}",
     ]
     for fail in result["failed"]:
-        lines.append(f"failed {fail['preset']}-{fail['seed']} ({fail['lesion']}): {fail['error']}")
+        chain = f" {fail['chain']}" if fail.get("chain") else ""
+        lines.append(f"failed {fail['preset']}-{fail['seed']}{chain} ({fail['lesion']}): "
+                     f"{fail['error']}")
     return "\n".join(lines)

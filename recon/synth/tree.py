@@ -30,6 +30,7 @@ from recon.bifurcation import carina_s_mm
 from recon.bifurcation import nearest_on_polyline as nearest_on_polyline_3d
 from recon.geometry import ViewGeometry, rotation_from_rotvec
 from recon.seeds import Seeds, Segment
+from recon.synth.presets import PhantomPreset
 from recon.types import arclength
 
 __all__ = [
@@ -652,16 +653,20 @@ def tree_seeds(rng: np.random.Generator, case) -> tuple[Seeds, tuple[int, ...], 
             tuple(end_s))
 
 
-def make_tree_case(preset: str, seed: int, lesion: str, stenosis_pct: float = 50.0,
-                   render: bool = True) -> TreeCase:
+def make_tree_case(preset: str | PhantomPreset, seed: int, lesion: str, stenosis_pct: float = 50.0,
+                   render: bool = True, chain: str | None = None) -> TreeCase:
     """A tree-suite case: :func:`recon.synth.case.make_phantom` with a bifurcation
-    lesion (:data:`TREE_LESIONS`) and its branches clicked (:func:`tree_seeds`)."""
+    lesion (:data:`TREE_LESIONS`) and its branches clicked (:func:`tree_seeds`).
+
+    ``preset`` is a preset name or a :class:`recon.synth.presets.PhantomPreset`
+    (a random pair); ``chain`` an imaging chain's name (None: the plain renderer).
+    """
     from recon.synth.case import make_phantom
 
     if lesion not in TREE_LESIONS:
         raise ValueError(f"unknown lesion {lesion!r} (use one of {', '.join(TREE_LESIONS)})")
     case = make_phantom(
-        preset, seed, stenosis_pct=stenosis_pct, render=render,
+        preset, seed, stenosis_pct=stenosis_pct, render=render, chain=chain,
         anatomy="branch-stenosis" if lesion in ("shoulder", "both") else None,
         side_stenosis_pct=stenosis_pct if lesion in ("ostium", "both") else 0.0,
     )
