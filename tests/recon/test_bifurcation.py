@@ -11,6 +11,7 @@ from recon.bifurcation import (
     bifurcation_qca,
     carina_s_mm,
     nearest_on_polyline,
+    sharpest_turn_deg,
 )
 from recon.types import Centerline3D, arclength
 
@@ -75,3 +76,20 @@ def test_qca_finds_the_lesions_and_the_medina_class():
     assert q.bifurcation_angle_deg == pytest.approx(50.0, abs=0.05)
     assert q.gap_mm < 1e-9 and q.join_shift_mm == 0.2
     assert set(q.to_dict()["side_branch"]) >= {"mld_mm", "reference_diameter_mm"}
+
+
+def test_sharpest_turn_is_the_corner_of_a_polyline_and_the_chord_angle_of_an_arc():
+    corner = np.deg2rad(30.0)
+    leg = np.linspace(0.0, 5.0, 51)[:, None]
+    first = leg * [1.0, 0.0, 0.0]
+    second = first[-1] + leg[1:] * [np.cos(corner), np.sin(corner), 0.0]
+    bent = np.vstack([first, second])  # a 30 degree corner at arc length 5 mm
+    assert sharpest_turn_deg(bent, 10.0) == pytest.approx(30.0, abs=1e-6)
+    assert sharpest_turn_deg(bent, 4.9) == pytest.approx(0.0, abs=1e-6)  # before the corner
+    assert sharpest_turn_deg(first, 5.0) == pytest.approx(0.0, abs=1e-6)
+    radius_mm = 10.0
+    t = np.linspace(0.0, 1.5, 400)
+    arc = radius_mm * np.column_stack([np.cos(t), np.sin(t), np.zeros_like(t)])
+    # successive 1 mm chords of a 10 mm circle turn by 2 asin(0.05) each
+    assert sharpest_turn_deg(arc, 12.0) == pytest.approx(np.degrees(2 * np.arcsin(0.05)),
+                                                         rel=1e-3)
