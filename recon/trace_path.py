@@ -178,7 +178,7 @@ class _Graph:
         self.graph = csr_matrix((data, indices, indptr), shape=(m, m))
         self.cost_px = cost_px[self.rows - self.box[0], self.cols - self.box[2]]  # (n,)
         # the shortest-path tree of the last search from all of a pixel's headings
-        self._last_tree: tuple[tuple[int, bytes, float], tuple[FloatArray, IntArray]] | None = \
+        self._last_tree: tuple[tuple[bytes, bytes, float], tuple[FloatArray, IntArray]] | None = \
             None
 
     def _moves(self, length_px: int, terms: tuple[FloatArray, FloatArray, FloatArray],
@@ -217,12 +217,21 @@ class _Graph:
         return self.rows[p], self.cols[p]
 
     def solve(self, start_rc: tuple[int, int], headings: IntArray, end_rc: tuple[int, int],
-              reach_px: float) -> tuple[IntArray | None, int]:
+              reach_px: float, start_reach_px: float = 0.0) -> tuple[IntArray | None, int]:
         """Cheapest node chain from the start pixel (any of ``headings``) to a band pixel
-        within ``reach_px`` of the end; (None, nearest reached band pixel) if none."""
+        within ``reach_px`` of the end; (None, nearest reached band pixel) if none.
+
+        ``start_reach_px`` > 0: the chain may start at any band pixel within that
+        distance of the start pixel (at no cost), so that a start on the edge of the
+        band, where the heading it needs has no move, can leave in that heading.
+        """
         p0 = self.index[start_rc]
-        sources = p0 * N_HEADINGS + headings
-        key = (int(p0), np.asarray(headings).tobytes())
+        starts = np.array([p0])
+        if start_reach_px > 0:
+            d0 = np.hypot(self.rows - start_rc[0], self.cols - start_rc[1])
+            starts = np.union1d(starts, np.flatnonzero(d0 <= start_reach_px))
+        sources = (starts[:, None] * N_HEADINGS + np.asarray(headings)[None, :]).ravel()
+        key = (starts.tobytes(), np.asarray(headings).tobytes())
         d_end = np.hypot(self.rows - end_rc[0], self.cols - end_rc[1])
         near = d_end <= reach_px
         end_cost = (d_end * self.cost_px)[:, None]
@@ -337,6 +346,15 @@ def _route_on(graph: _Graph, local: FloatArray, rc: list[tuple[int, int]], move_
     headings = np.arange(N_HEADINGS)
     for i in range(len(local) - 1):
         chain, last = graph.solve(rc[i], headings, rc[i + 1], reach_px=float(move_px))
+        if i == 0 and chain is not None and _retraces(
+                _leg_points(graph, chain, rc[0], local[0], local[1]), radius_px):
+            # A first click on the edge of the band (a bifurcation click on its parent's
+            # edge) from which no move leads towards the vessel: the route wheeled
+            # round somewhere and came back. It may start within one move of the click.
+            near_start, _ = graph.solve(rc[0], headings, rc[1], float(move_px),
+                                        start_reach_px=float(move_px))
+            if near_start is not None:
+                chain = near_start
         if chain is None and i > 0 and i not in no_fold:
             # Reachable only by turning at the waypoint: a vessel that folds back in
             # projection (foreshortened) turns there too, so the turn is allowed; clicks
@@ -350,12 +368,8 @@ def _route_on(graph: _Graph, local: FloatArray, rc: list[tuple[int, int]], move_
                 "where it continues, or check that both clicks are on the same vessel",
                 view=view, near_px=near,
             )
-        rows, cols = graph.node_pixels(chain)
-        pts = np.column_stack([cols, rows]).astype(float)
-        pts[0] = local[i]
-        pts = np.vstack([pts, local[i + 1]])
-        new = [_chord_points(a, b) for a, b in zip(pts[:-1], pts[1:], strict=True)
-               if np.hypot(*(b - a)) > 1e-9]
+        leg = _leg_points(graph, chain, rc[i], local[i], local[i + 1])
+        new = [leg] if len(leg) else []
         if i > 0 and new and _turns_back(np.concatenate(pieces), np.concatenate(new),
                                          radius_px):
             near = local[i] + np.asarray(origin, float)
@@ -374,6 +388,23 @@ def _route_on(graph: _Graph, local: FloatArray, rc: list[tuple[int, int]], move_
     path = np.concatenate(pieces) + np.asarray(origin, float)
     return Route(path_px=path, click_index=np.asarray(click_index, dtype=np.int64),
                  move_px=move_px)
+
+
+def _leg_points(graph: _Graph, chain: IntArray, start_rc: tuple[int, int], start: FloatArray,
+                end: FloatArray) -> FloatArray:
+    """The points (n, 2), about 1 px apart, of a leg's node chain from the click ``start``
+    (2,) (excluded) to ``end`` (2,); a chain that starts on another pixel than the
+    click's is joined to the click by a chord."""
+    rows, cols = graph.node_pixels(chain)
+    pts = np.column_stack([cols, rows]).astype(float)
+    if (int(rows[0]), int(cols[0])) == start_rc:
+        pts[0] = start
+    else:
+        pts = np.vstack([start, pts])
+    pts = np.vstack([pts, end])
+    legs = [_chord_points(a, b) for a, b in zip(pts[:-1], pts[1:], strict=True)
+            if np.hypot(*(b - a)) > 1e-9]
+    return np.concatenate(legs) if legs else np.empty((0, 2))
 
 
 def _round_loops(route: Route, graph: _Graph, rings: list[NDArray[np.bool_]],

@@ -239,3 +239,28 @@ def test_a_search_bounded_by_cost_gives_the_unbounded_route(monkeypatch) -> None
                                       routes["unbounded"].click_index)
     # on the bent vessel (the pixel route, within its 3 px lumen), not the neighbour
     assert cKDTree(bend).query(routes["unbounded"].path_px)[0].max() < 4.0
+
+
+
+def test_a_branch_traced_from_its_bifurcation_click_goes_straight_into_the_branch() -> None:
+    """A phantom tree (the tree suite's random pair 5; view B) whose side branch leaves
+    its parent at a sharp angle in projection, its first click on the parent's edge:
+    no move leaves that pixel towards the branch, and from the click alone the route
+    ran up the parent, wheeled round in a wide blob 80 px away and came back (refused as
+    doubling back). The first leg may start within one move of the click."""
+    from recon.synth.suites import random_geometry
+    from recon.synth.tree import make_tree_case
+
+    pair = random_geometry(np.random.default_rng([0, 5, 15]), "random-5")
+    tc = make_tree_case(pair, 5, "both", stenosis_pct=57.2)
+    case, branch = tc.case, tc.seeds.segments[1]
+    view = case.view_b_true
+    cl = trace_segment(case.image_b, np.asarray(branch.b_px, float), view="B",
+                       pixel_mm=view.pixel_mm_at_isocenter)
+    truth_px = view.project(case.truth.vessels[tc.vessels[1]][0])
+    off, nearest = cKDTree(truth_px).query(cl.points_px)
+    assert np.median(off) < 1.0 and off.max() < 4.0  # on the branch from start to end
+    true_length = np.sum(np.linalg.norm(np.diff(truth_px[nearest[0]:nearest[-1] + 1], axis=0),
+                                        axis=1))
+    length = np.sum(np.linalg.norm(np.diff(cl.points_px, axis=0), axis=1))
+    assert length < 1.1 * true_length  # no detour
