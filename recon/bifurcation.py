@@ -68,6 +68,7 @@ QCA_SEGMENT_MM = 10.0  # length of each of the three bifurcation segments
 DIRECTION_WINDOW_MM = (0.0, 4.0)  # direction fit window beyond each segment's start
 MEDINA_DS_PCT = 50.0  # a Medina 1: diameter stenosis at least this
 _MIN_BLEND_MM = 1.0
+MAX_JOIN_TURN_DEG = 10.0  # the most the join's blend may turn a branch
 TURN_CHORD_MM = 1.0  # chord length of sharpest_turn_deg
 
 
@@ -128,14 +129,20 @@ class Junction:
         """The branch centerline with its start moved onto the parent's centerline.
 
         The shift J - X_0 is blended out with a raised cosine over the
-        branch's first max(carina arc length, 1 mm): the stretch inside the
-        parent's lumen. Arc length and tangents are recomputed; radii and
-        the raw points stay.
+        branch's first max(carina arc length, 1 mm) (the stretch inside the
+        parent's lumen), or longer where the shift is large, so that the
+        blend turns the branch by at most :data:`MAX_JOIN_TURN_DEG` (a raised
+        cosine of height d over L has the steepest slope pi d / (2 L)); at most
+        half the branch. Arc length and tangents are recomputed; radii and the
+        raw points stay.
         """
         X = np.asarray(cl3d.X_world, dtype=float)
         J, _, _ = nearest_on_polyline(self.parent_X_world, X[0])
         s = arclength(X)
-        blend = max(carina_s_mm(X, self.parent_X_world, self.parent_radius_mm), _MIN_BLEND_MM)
+        shift_mm = float(np.linalg.norm(J - X[0]))
+        blend = max(carina_s_mm(X, self.parent_X_world, self.parent_radius_mm), _MIN_BLEND_MM,
+                    min(np.pi * shift_mm / (2.0 * np.tan(np.radians(MAX_JOIN_TURN_DEG))),
+                        0.5 * float(s[-1])))
         w = np.where(s < blend, 0.5 * (1.0 + np.cos(np.pi * np.clip(s / blend, 0.0, 1.0))), 0.0)
         X_new = X + w[:, None] * (J - X[0])[None, :]
         T = np.gradient(X_new, axis=0)

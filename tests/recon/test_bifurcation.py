@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from recon.bifurcation import (
+    MAX_JOIN_TURN_DEG,
     Junction,
     bifurcation_angles_deg,
     bifurcation_qca,
@@ -40,9 +41,14 @@ def test_angles_of_a_straight_y_are_the_construction_angles(theta):
     assert info["junction_s_mm"] == pytest.approx(30.0, abs=1e-9)
 
 
-def test_the_join_moves_the_start_onto_the_parent_and_keeps_the_branch_beyond_the_carina():
+@pytest.mark.parametrize("off_mm", [0.1, 0.6, 2.0])
+def test_the_join_moves_the_start_onto_the_parent_and_keeps_the_branch_beyond_the_blend(
+        off_mm: float):
+    """No gap; the branch unchanged beyond the carina or, for a start far off the parent,
+    beyond the stretch over which the shift is blended out without turning the branch
+    by more than MAX_JOIN_TURN_DEG."""
     parent, r, branch = _y(45.0)
-    off = branch + np.array([0.0, 0.0, 0.6])  # triangulated 0.6 mm off the parent
+    off = branch + np.array([0.0, 0.0, off_mm])  # triangulated off the parent
     T = np.gradient(off, axis=0)
     T /= np.linalg.norm(T, axis=1)[:, None]
     cl = Centerline3D(X_world=off, s_mm=arclength(off), tangents=T,
@@ -52,10 +58,12 @@ def test_the_join_moves_the_start_onto_the_parent_and_keeps_the_branch_beyond_th
     joined = Junction(parent, r).join(cl)
     foot, _, _ = nearest_on_polyline(parent, joined.X_world[0])
     assert np.linalg.norm(joined.X_world[0] - foot) < 1e-9  # no gap
-    s_c = carina_s_mm(off, parent, r)
-    beyond = cl.s_mm >= s_c
+    blend = max(carina_s_mm(off, parent, r), 1.0,
+                np.pi * off_mm / (2.0 * np.tan(np.radians(MAX_JOIN_TURN_DEG))))
+    beyond = cl.s_mm >= blend
     np.testing.assert_allclose(joined.X_world[beyond], off[beyond], atol=1e-12)
     assert np.all(np.linalg.norm(joined.tangents, axis=1) == pytest.approx(1.0))
+    assert sharpest_turn_deg(joined.X_world, 30.0, chord_mm=0.2) < MAX_JOIN_TURN_DEG + 0.5
 
 
 def test_qca_finds_the_lesions_and_the_medina_class():
