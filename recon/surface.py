@@ -10,11 +10,15 @@ paper's hemispherical point clouds) sampled in a narrow band on a voxel
 grid, turned into a mesh by marching cubes and repaired into a watertight,
 consistently wound, outward-facing ``trimesh.Trimesh`` in mm, world frame
 of view A.
+
+The mesh draws no semi-axis thinner than :data:`MESH_MIN_SEMI_AXIS_VOXELS` voxels: a
+lumen narrower than the grid can sample would otherwise fall apart into pieces at its
+neck. The sections (and so every measurement) keep their own sizes.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import trimesh
@@ -49,6 +53,9 @@ __all__ = [
 
 
 _MAX_GRID_VOXELS = 12_000_000
+#: The least semi-axis the mesh draws, in voxels (a tube this thin keeps voxel centres
+#: inside it all along its axis, whatever its direction through the grid).
+MESH_MIN_SEMI_AXIS_VOXELS = 1.0
 _CHUNK = 400_000  # shell voxels per distance pass of the tree's union
 # Shell voxels per distance pass of one vessel: a pass's dozen (N, 3) and (N,) temporaries
 # stay within a core's cache (on the demo's 138 k voxels ~10 % less CPU than one pass;
@@ -165,6 +172,17 @@ def _tube_sdf(points: FloatArray, sections: CrossSections, tree: cKDTree) -> Flo
                 float(np.sqrt(a * b)),
             )
     return sdf
+
+
+def _drawable(sections: CrossSections, voxel_mm: float) -> CrossSections:
+    """The sections with every semi-axis at least MESH_MIN_SEMI_AXIS_VOXELS voxels (for
+    the distance field only)."""
+    floor = MESH_MIN_SEMI_AXIS_VOXELS * voxel_mm
+    if float(sections.minor_mm.min()) >= floor:
+        return sections
+    major = np.maximum(sections.major_mm, floor)
+    minor = np.maximum(sections.minor_mm, floor)
+    return replace(sections, major_mm=major, minor_mm=minor, area_mm2=np.pi * major * minor)
 
 
 def default_voxel_mm(sections: CrossSections) -> float:
@@ -358,12 +376,13 @@ def build_surface(
     shape = tuple(int(k) for k in np.ceil((hi - lo) / voxel).astype(int) + 1)
 
     band = 2.0 * voxel  # exact distances within this of the wall; the rest is only a sign
-    shell, inner = _shell_voxels(sections, shape, lo, voxel, band)
+    drawn = _drawable(sections, voxel)
+    shell, inner = _shell_voxels(drawn, shape, lo, voxel, band)
     wall_values = np.empty(len(shell), dtype=np.float32)
-    tree = cKDTree(sections.centers)
+    tree = cKDTree(drawn.centers)
     for start in range(0, len(shell), _SDF_CHUNK):
         ijk = np.stack(np.unravel_index(shell[start : start + _SDF_CHUNK], shape), axis=1)
-        wall_values[start : start + _SDF_CHUNK] = _tube_sdf(lo + ijk * voxel, sections, tree)
+        wall_values[start : start + _SDF_CHUNK] = _tube_sdf(lo + ijk * voxel, drawn, tree)
     tiny = np.float32(1e-4 * voxel)  # exact zeros nudged off the level
     wall_values[np.abs(wall_values) < tiny] = tiny
     verts, faces = _marching_cubes_on_blocks(shape, band, shell, wall_values, inner)
@@ -437,7 +456,7 @@ def build_tree_surface(
     shape = tuple(int(k) for k in np.ceil((hi - lo) / voxel).astype(int) + 1)
     band = 2.0 * voxel
     grid = np.full(int(np.prod(shape)), band, dtype=np.float32)
-    for sec in sections:
+    for sec in (_drawable(sec, voxel) for sec in sections):
         shell, inner = _shell_voxels(sec, shape, lo, voxel, band)
         grid[inner] = np.minimum(grid[inner], -band)
         tree = cKDTree(sec.centers)
