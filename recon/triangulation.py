@@ -203,8 +203,9 @@ def build_centerline_3d(
         rel_a, rel_b = along(matching.centerline_a.reliability, matching.centerline_b.reliability)
         overlap_a, overlap_b = _overlap_stretches(rel_a, rel_b, spacing_mm)
         # An overlap only widens the fitted lumen: replace where the untrusted view is wider.
-        overlap_a &= radius_a_mm > radius_b_mm
-        overlap_b &= radius_b_mm > radius_a_mm
+        # ... or a fit that collapsed beside a touching neighbour (much narrower).
+        overlap_a &= (radius_a_mm > radius_b_mm) | (radius_a_mm < _COLLAPSED * radius_b_mm)
+        overlap_b &= (radius_b_mm > radius_a_mm) | (radius_b_mm < _COLLAPSED * radius_a_mm)
         radius_a_mm, radius_b_mm = (
             np.where(overlap_a, radius_b_mm, radius_a_mm),
             np.where(overlap_b, radius_a_mm, radius_b_mm),
@@ -226,6 +227,9 @@ def build_centerline_3d(
         depth_a=depth_a,
         depth_b=depth_b,
     )
+
+
+_COLLAPSED = 0.6
 
 
 def _overlap_stretches(

@@ -179,6 +179,30 @@ def test_overlap_in_one_view_takes_the_other_views_radius():
     assert np.allclose(fixed.radius_a_mm[outside], raw.radius_a_mm[outside])
 
 
+@pytest.mark.parametrize(("factor", "substituted"), [(0.3, True), (0.8, False)])
+def test_an_untrusted_view_that_collapsed_takes_the_other_views_radius(factor, substituted):
+    """A fit beside a touching neighbour can collapse instead of widening (a side branch
+    running along its parent): where the untrusted view reads much narrower (below 0.6
+    of the other view) the other view's radius stands in; a mildly narrower untrusted
+    view (a lesion it may see better) is kept."""
+    X = coronary_curve("gentle")
+    va, vb = table1_views("data1")
+    ca = _with_overlap(projected_centerline(X, va), X, va, 0.4, 0.6, factor)
+    cb = projected_centerline(X, vb)
+    m = match_centerlines(ca, cb, va, vb, method="match3")
+    fixed = build_centerline_3d(m, va, vb)
+    raw = build_centerline_3d(m, va, vb, overlap_substitution=False)
+    mid = fixed.s_mm / fixed.length_mm
+    inside = (mid > 0.45) & (mid < 0.55)
+    ratio = np.median(raw.radius_a_mm[inside] / raw.radius_b_mm[inside])
+    assert ratio < 0.4 if substituted else 0.65 < ratio < 1.0  # as traced
+    assert np.all(fixed.overlap_a[inside]) == substituted
+    if substituted:
+        assert np.allclose(fixed.radius_a_mm[inside], fixed.radius_b_mm[inside])
+    else:
+        assert np.allclose(fixed.radius_a_mm, raw.radius_a_mm)
+
+
 def test_overlap_in_both_views_keeps_both_radii():
     X = coronary_curve("gentle")
     va, vb = table1_views("data1")
