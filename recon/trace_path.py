@@ -30,6 +30,10 @@ A loop that the route cut across at its crossing is followed round
 twice; :func:`ring_circuits`, a tight loop's ring, whose hole shows above the band's
 level).
 
+A first leg that runs back along itself (a first click on the edge of the band, such
+as a branch's bifurcation click on its parent, where no move leads the way the vessel
+goes) is solved again from any band pixel within one move of the click.
+
 Checks of a traced centerline (:func:`find_route_problem`): a stretch off the
 vessel, a hairpin (the route doubling back) or a stretch that runs over an
 earlier part of the route.

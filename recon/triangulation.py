@@ -13,10 +13,11 @@ Steps of :func:`build_centerline_3d`:
    paper's sqrt(x^2 + y^2 + z^2) / sqrt(u^2 + v^2 + SID^2);
 5. overlaps: where one view's profile fit is not trusted (its 2D reliability
    is below ``OVERLAP_RELIABILITY``: another vessel overlaps or touches it
-   there, which widens the fitted lumen) and the other view's is, and the
-   untrusted radius is the larger, the trusted view's radius stands in for
-   both ellipse axes (a circular lumen is the best guess when one view
-   cannot see the width). The stretches are widened by ``OVERLAP_MARGIN_MM``
+   there, which widens the fitted lumen, or beside a touching neighbour
+   makes it collapse) and the other view's is, and the untrusted radius is
+   the larger or below ``_COLLAPSED`` times the other, the trusted view's
+   radius stands in for both ellipse axes (a circular lumen is the best
+   guess when one view cannot see the width). The stretches are widened by ``OVERLAP_MARGIN_MM``
    and returned as ``overlap_a``/``overlap_b``; the report lists them.
 """
 
@@ -229,6 +230,7 @@ def build_centerline_3d(
     )
 
 
+#: An untrusted view's radius below this fraction of the other view's is a collapsed fit.
 _COLLAPSED = 0.6
 
 
