@@ -257,7 +257,8 @@ def _stacked(centerlines: Sequence[Centerline3D]) -> Centerline3D:
 
 #: The fields of a Centerline3D with one value per point.
 _PER_POINT = ("X_world", "s_mm", "tangents", "radius_a_mm", "radius_b_mm", "overlap_a",
-              "overlap_b", "depth_a", "depth_b", "fill_a", "fill_b")
+              "overlap_b", "depth_a", "depth_b", "fill_a", "fill_b", "fit_radius_a_mm",
+              "fit_radius_b_mm")
 
 
 def elliptic_cross_sections(

@@ -200,6 +200,7 @@ def build_centerline_3d(
     radius_b_mm = radius_mm_eq11(rad_b_px, X_out, view_b)
     overlap_a = np.zeros(len(s_out), dtype=bool)
     overlap_b = np.zeros(len(s_out), dtype=bool)
+    fit_a, fit_b = radius_a_mm, radius_b_mm  # each view's own fit, kept for the intervals
     if overlap_substitution:
         rel_a, rel_b = along(matching.centerline_a.reliability, matching.centerline_b.reliability)
         overlap_a, overlap_b = _overlap_stretches(rel_a, rel_b, spacing_mm)
@@ -225,6 +226,8 @@ def build_centerline_3d(
         points_b_px=pb,
         overlap_a=overlap_a,
         overlap_b=overlap_b,
+        fit_radius_a_mm=fit_a if np.any(overlap_a | overlap_b) else None,
+        fit_radius_b_mm=fit_b if np.any(overlap_a | overlap_b) else None,
         depth_a=depth_a,
         depth_b=depth_b,
     )

@@ -232,6 +232,9 @@ class Centerline3D:
     fill_a, fill_b : (M,) the densitometric area over each view's caliper circle,
         A / (pi r_k^2) (:func:`recon.densitometry.with_fill_ratios`), or None: then
         the sections are built from the two calipers alone.
+    fit_radius_a_mm, fit_radius_b_mm : (M,) each view's own fitted radius where
+        ``overlap_a``/``overlap_b`` replaced it (the two views' disagreement before
+        the substitution, for the intervals), or None: as ``radius_a_mm``/``_b_mm``.
     """
 
     X_world: FloatArray
@@ -248,6 +251,8 @@ class Centerline3D:
     depth_b: FloatArray | None = None
     fill_a: FloatArray | None = None
     fill_b: FloatArray | None = None
+    fit_radius_a_mm: FloatArray | None = None
+    fit_radius_b_mm: FloatArray | None = None
 
     def __post_init__(self) -> None:
         m = len(self.X_world)
@@ -256,7 +261,8 @@ class Centerline3D:
                 object.__setattr__(self, name, np.zeros(m, dtype=bool))
             elif np.shape(getattr(self, name)) != (m,):
                 raise ValueError(f"{name} must be ({m},), got {np.shape(getattr(self, name))}")
-        for name in ("depth_a", "depth_b", "fill_a", "fill_b"):
+        for name in ("depth_a", "depth_b", "fill_a", "fill_b", "fit_radius_a_mm",
+                     "fit_radius_b_mm"):
             if getattr(self, name) is not None and np.shape(getattr(self, name)) != (m,):
                 raise ValueError(f"{name} must be ({m},), got {np.shape(getattr(self, name))}")
 

@@ -478,6 +478,15 @@ def measurement_intervals(
     ones = np.ones(len(X0))
     fa0, fb0 = radius_mm_eq11(ones, X0, view_a), radius_mm_eq11(ones, X0, view_b0)
     err_model = radius_error_model(s0, centerline.radius_a_mm, centerline.radius_b_mm)
+    if centerline.fit_radius_a_mm is not None and centerline.fit_radius_b_mm is not None:
+        # Where one view's radius stood in for the other's, the two agree by construction
+        # and the radius rests on one view: the local error there is the one the views'
+        # own fits showed.
+        fitted = radius_error_model(s0, centerline.fit_radius_a_mm,
+                                    centerline.fit_radius_b_mm)
+        stood_in = centerline.overlap_a | centerline.overlap_b
+        err_model = replace(err_model, local_sd=np.where(
+            stood_in, np.maximum(err_model.local_sd, fitted.local_sd), err_model.local_sd))
     errors = err_model.sample(rng, s0, n_samples)  # (n, 2, M)
     # the part of the 2D fits' error both views share (invisible in their disagreement):
     # COMMON_RADIUS_SD_PX per view, relative to each view's radius in px

@@ -192,3 +192,28 @@ def test_two_views_that_agree_still_leave_their_shared_fit_error():
     sd_rel = (hi - lo) / 2 / 1.96 / meas.mld_mm
     assert sd_rel > 0.7 * COMMON_RADIUS_SD_PX / r_px, (sd_rel, r_px)
     assert iv.radius_error["common_sd_px"] == COMMON_RADIUS_SD_PX
+
+
+def test_a_radius_that_stood_in_for_the_other_views_keeps_their_disagreement():
+    """Where one view's fit was not trusted and the other view's radius stood in for it
+    (recon.triangulation, step 5), the two radii agree by construction; the intervals
+    take the error model from the views' own fits there, so the MLD interval is as wide
+    as the disagreement they showed, not narrowed by the substitution."""
+    from dataclasses import replace
+
+    rng = np.random.default_rng(5)
+    cal, cl, _, _ = simulated(rng)
+    s = cl.s_mm
+    stretch = np.abs(s - 0.5 * s[-1]) < 4.0  # the lesion, where view A's fit collapsed
+    fit_a = np.where(stretch, 0.5 * cl.radius_a_mm, cl.radius_a_mm)
+    stood_in = replace(cl, radius_a_mm=np.where(stretch, cl.radius_b_mm, cl.radius_a_mm),
+                       overlap_a=stretch)
+    area = elliptic_cross_sections(stood_in, VIEW_A, cal.view_b).area_mm2
+    meas = measure_lumen(lumen_profile(s, area))
+    widths = {}
+    for name, c in (("hidden", stood_in),
+                    ("kept", replace(stood_in, fit_radius_a_mm=fit_a,
+                                     fit_radius_b_mm=cl.radius_b_mm))):
+        lo, hi = measurement_intervals(VIEW_A, VIEW_B, cal.posterior, c, meas).ci95["mld_mm"]
+        widths[name] = hi - lo
+    assert widths["kept"] > 1.5 * widths["hidden"], widths

@@ -199,8 +199,12 @@ def test_an_untrusted_view_that_collapsed_takes_the_other_views_radius(factor, s
     assert np.all(fixed.overlap_a[inside]) == substituted
     if substituted:
         assert np.allclose(fixed.radius_a_mm[inside], fixed.radius_b_mm[inside])
+        # each view's own fit is kept for the intervals
+        np.testing.assert_allclose(fixed.fit_radius_a_mm, raw.radius_a_mm)
+        np.testing.assert_allclose(fixed.fit_radius_b_mm, raw.radius_b_mm)
     else:
         assert np.allclose(fixed.radius_a_mm, raw.radius_a_mm)
+        assert fixed.fit_radius_a_mm is None and fixed.fit_radius_b_mm is None
 
 
 def test_overlap_in_both_views_keeps_both_radii():
