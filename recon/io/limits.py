@@ -147,7 +147,10 @@ def job_limits(limits: JobLimits, what: str = "the reconstruction",
             signal.setitimer(signal.ITIMER_PROF, limits.cpu_s)
             usage = resource.getrusage(resource.RUSAGE_SELF)
             spent = usage.ru_utime + usage.ru_stime
-            soft_cpu = int(spent + limits.cpu_s) + 1
+            # one second more than the budget's whole seconds: getrusage's figure can lag
+            # the kernel's CPU clock by tenths of a second under load, and the backstop
+            # must not fire before the timer
+            soft_cpu = int(spent + limits.cpu_s) + 2
             if old_cpu[1] != resource.RLIM_INFINITY:
                 soft_cpu = min(soft_cpu, old_cpu[1])
             resource.setrlimit(resource.RLIMIT_CPU, (soft_cpu, old_cpu[1]))
