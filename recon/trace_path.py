@@ -350,15 +350,17 @@ def _route_on(graph: _Graph, local: FloatArray, rc: list[tuple[int, int]], move_
     headings = np.arange(N_HEADINGS)
     for i in range(len(local) - 1):
         chain, last = graph.solve(rc[i], headings, rc[i + 1], reach_px=float(move_px))
-        if i == 0 and chain is not None and _retraces(
-                _leg_points(graph, chain, rc[0], local[0], local[1]), radius_px):
-            # A first click on the edge of the band (a bifurcation click on its parent's
-            # edge) from which no move leads towards the vessel: the route wheeled
-            # round somewhere and came back. It may start within one move of the click.
-            near_start, _ = graph.solve(rc[0], headings, rc[1], float(move_px),
-                                        start_reach_px=float(move_px))
-            if near_start is not None:
-                chain = near_start
+        leg = None
+        if i == 0 and chain is not None:
+            leg = _leg_points(graph, chain, rc[0], local[0], local[1])
+            if _retraces(leg, radius_px):
+                # A first click on the edge of the band (a bifurcation click on its
+                # parent's edge) from which no move leads towards the vessel: the route
+                # wheeled round somewhere and came back. It may start within one move.
+                near_start, _ = graph.solve(rc[0], headings, rc[1], float(move_px),
+                                            start_reach_px=float(move_px))
+                if near_start is not None:
+                    chain, leg = near_start, None
         if chain is None and i > 0 and i not in no_fold:
             # Reachable only by turning at the waypoint: a vessel that folds back in
             # projection (foreshortened) turns there too, so the turn is allowed; clicks
@@ -372,7 +374,8 @@ def _route_on(graph: _Graph, local: FloatArray, rc: list[tuple[int, int]], move_
                 "where it continues, or check that both clicks are on the same vessel",
                 view=view, near_px=near,
             )
-        leg = _leg_points(graph, chain, rc[i], local[i], local[i + 1])
+        if leg is None:
+            leg = _leg_points(graph, chain, rc[i], local[i], local[i + 1])
         new = [leg] if len(leg) else []
         if i > 0 and new and _turns_back(np.concatenate(pieces), np.concatenate(new),
                                          radius_px):

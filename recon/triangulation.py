@@ -17,8 +17,8 @@ Steps of :func:`build_centerline_3d`:
    makes it collapse) and the other view's is, and the untrusted radius is
    the larger or below ``_COLLAPSED`` times the other, the trusted view's
    radius stands in for both ellipse axes (a circular lumen is the best
-   guess when one view cannot see the width). The stretches are widened by ``OVERLAP_MARGIN_MM``
-   and returned as ``overlap_a``/``overlap_b``; the report lists them.
+   guess when one view cannot see the width). The stretches are widened by
+   ``OVERLAP_MARGIN_MM`` and returned as ``overlap_a``/``overlap_b``; the report lists them.
 """
 
 from __future__ import annotations
@@ -212,6 +212,7 @@ def build_centerline_3d(
             np.where(overlap_a, radius_b_mm, radius_a_mm),
             np.where(overlap_b, radius_a_mm, radius_b_mm),
         )
+    substituted = bool(np.any(overlap_a | overlap_b))
     depth_a = depth_b = None
     if matching.centerline_a.depth is not None and matching.centerline_b.depth is not None:
         depth_a, depth_b = along(matching.centerline_a.depth, matching.centerline_b.depth)
@@ -226,8 +227,8 @@ def build_centerline_3d(
         points_b_px=pb,
         overlap_a=overlap_a,
         overlap_b=overlap_b,
-        fit_radius_a_mm=fit_a if np.any(overlap_a | overlap_b) else None,
-        fit_radius_b_mm=fit_b if np.any(overlap_a | overlap_b) else None,
+        fit_radius_a_mm=fit_a if substituted else None,
+        fit_radius_b_mm=fit_b if substituted else None,
         depth_a=depth_a,
         depth_b=depth_b,
     )

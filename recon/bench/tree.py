@@ -77,6 +77,13 @@ TREE_SUITES = ("tree", "tree-varied")
 BIFURCATION_SEGMENTS = ("proximal_main", "distal_main", "side_branch")
 
 
+def _taper(r_mm: np.ndarray) -> np.ndarray:
+    """The undiseased (linear) taper (N,) of a radius profile sampled every SAMPLE_STEP_MM:
+    a phantom lesion is a bump that vanishes at the vessel's ends."""
+    t = np.linspace(0.0, 1.0, len(r_mm))
+    return r_mm[0] + (r_mm[-1] - r_mm[0]) * t
+
+
 def _branch_truth(tc: TreeCase, j: int) -> tuple[float, float]:
     """(true MLD, true reference diameter at it) mm of segment j of the tree case."""
     truth = tc.case.truth
@@ -87,16 +94,8 @@ def _branch_truth(tc: TreeCase, j: int) -> tuple[float, float]:
     s = np.arange(len(X)) * SAMPLE_STEP_MM
     s_c = carina_s_mm(X, main_X, main_r)
     inside = (s >= s_c) & (s <= tc.end_s_mm[j])
-    taper = r[0] + (r[-1] - r[0]) * s / s[-1]
     i = int(np.flatnonzero(inside)[np.argmin(r[inside])])
-    return float(2 * r[i]), float(2 * taper[i])
-
-
-def _taper(r_mm: np.ndarray) -> np.ndarray:
-    """The undiseased (linear) taper (N,) of a radius profile sampled every SAMPLE_STEP_MM:
-    a phantom lesion is a bump that vanishes at the vessel's ends."""
-    t = np.linspace(0.0, 1.0, len(r_mm))
-    return r_mm[0] + (r_mm[-1] - r_mm[0]) * t
+    return float(2 * r[i]), float(2 * _taper(r)[i])
 
 
 def true_bifurcation(tc: TreeCase, j: int) -> BifurcationQCA:
@@ -115,6 +114,10 @@ def true_bifurcation(tc: TreeCase, j: int) -> BifurcationQCA:
         seg.bifurcation, seg.parent, seg.name,
         p_X, (arclength(p_X), 2 * p_r, 2 * p_ref),
         b_X[keep], (arclength(b_X[keep]), 2 * b_r[keep], 2 * _taper(b_r)[keep]), 0.0)
+
+
+def _preset_name(preset: str | PhantomPreset) -> str:
+    return preset if isinstance(preset, str) else preset.name
 
 
 def _case(job: tuple) -> dict:
@@ -170,7 +173,7 @@ def _case(job: tuple) -> dict:
     _, after_matched = pose_error(matched.view_b, tc.case.view_b_true, X_tree)
     mesh = rec.tree_surface.mesh
     return {
-        "preset": preset if isinstance(preset, str) else preset.name,
+        "preset": _preset_name(preset),
         "chain": chain, "seed": seed, "lesion": lesion, "stenosis_pct": stenosis_pct,
         "segments": segments,
         "bifurcations": bifurcations,
@@ -208,9 +211,9 @@ def _case_or_failure(job: tuple) -> tuple[dict | None, dict | None]:
         return _case(job), None
     except (CoronaryError, ValueError) as err:
         preset, seed, lesion, chain, pct = job
-        name = preset if isinstance(preset, str) else preset.name
-        return None, {"preset": name, "chain": chain, "seed": seed, "lesion": lesion,
-                      "stenosis_pct": pct, "error": " ".join(str(err).split())}
+        return None, {"preset": _preset_name(preset), "chain": chain, "seed": seed,
+                      "lesion": lesion, "stenosis_pct": pct,
+                      "error": " ".join(str(err).split())}
 
 
 def run_tree(cases: int | None = None, seed: int = 0, suite: str = "tree") -> dict:
@@ -242,8 +245,8 @@ def summarise(rows: list[dict], failed: list[dict]) -> dict:
     mld_all = np.array([s["mld_error_mm"] for s in segs], dtype=float)
     mld = np.array([s["mld_error_mm"] for s in lesion], dtype=float)
     ref = np.array([s["ref_diam_error_mm"] for s in lesion], dtype=float)
-    ang = np.array([b["angle_error_deg"] for r in rows for b in r["bifurcations"]], dtype=float)
     bifs = [b for r in rows for b in r["bifurcations"]]
+    ang = np.array([b["angle_error_deg"] for b in bifs], dtype=float)
     gaps = [b["gap_mm"] for b in bifs]
     ds_err = {k: np.array([b["ds_pct"][k] - b["ds_true_pct"][k] for b in bifs], dtype=float)
               for k in BIFURCATION_SEGMENTS}
