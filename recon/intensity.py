@@ -20,10 +20,6 @@ too little for that, the vessel profiles decide (the Box-Cox profile likelihood:
 residuals of the blurred-cylinder fits of ``a_lambda(I) / G^(lambda - 1)``, G = the
 samples' geometric mean, comparable across lambda).
 
-For a pair of display-processed files, :func:`agreeing_mapping` takes the
-mapping under which both views give the same lumen size (the pipeline traces
-each view under both).
-
 A profile's shape cannot tell a curved mapping from a wrong blur (a 0.1 px
 blur error moves the best power by ~1), so the radius fit uses the mapping's
 power; only for display-processed files, whose mapping is neither, does a
@@ -48,8 +44,6 @@ __all__ = [
     "best_blur",
     "best_enhancement",
     "tag_mapping",
-    "agreeing_mapping",
-    "PAIR_MARGIN",
     "noise_trend",
     "NoiseTrend",
     "is_display_processed",
@@ -286,33 +280,6 @@ def tag_mapping(relationship: str | None) -> str | None:
     """"lin" or "log" when the PixelIntensityRelationship says LIN or LOG, else None."""
     tag = (relationship or "").strip().upper()
     return {"LIN": "lin", "LOG": "log"}.get(tag)
-
-
-#: The two views' median radii must agree this much better (difference of |ln(r_a / r_b)|)
-#: under one mapping than under the other for :func:`agreeing_mapping` to choose it.
-PAIR_MARGIN = 0.01
-
-
-def agreeing_mapping(radius_mm: dict[str, tuple[float, float]]) -> tuple[str | None, str]:
-    """The mapping under which two views of one lumen give the same size, with a reason.
-
-    ``radius_mm``: for "lin" and "log", the two views' median lumen radii (mm, at the
-    isocentre's scale) traced under that mapping. A wrong mapping biases a fitted
-    radius by an amount that grows with the vessel's contrast, and the contrast of
-    one lumen differs between two views (path length through it, background), so
-    the wrong mapping makes the views disagree. Returns (the mapping whose
-    |ln(r_a / r_b)| is smaller by at least :data:`PAIR_MARGIN`, or None when
-    neither is, the one-line reason).
-    """
-    gap = {m: abs(float(np.log(ra / rb))) for m, (ra, rb) in radius_mm.items()
-           if ra > 0 and rb > 0 and np.isfinite(ra) and np.isfinite(rb)}
-    shown = ", ".join(f"{100 * (np.exp(gap[m]) - 1):.1f} % as {m} ({radius_mm[m][0]:.2f} / "
-                      f"{radius_mm[m][1]:.2f} mm)" for m in ("lin", "log") if m in gap)
-    if len(gap) < 2 or abs(gap["lin"] - gap["log"]) < PAIR_MARGIN:
-        return None, f"the two views' median radii differ by {shown}: no mapping preferred"
-    best = min(gap, key=gap.__getitem__)
-    return best, (f"the two views' median radii differ by {shown}, so {best} is used for "
-                  "both")
 
 
 def is_display_processed(relationship: str | None) -> bool:

@@ -19,7 +19,6 @@ The output files (centerline CSV, report JSON, meshes) are written by
 
 from __future__ import annotations
 
-import dataclasses
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -43,7 +42,6 @@ from recon.errors import CoronaryError
 from recon.geometry import MIN_VIEW_SEPARATION_DEG, ViewGeometry, view_separation_deg
 from recon.intensity import (
     IntensityMapping,
-    agreeing_mapping,
     is_display_processed,
     resolve_mapping,
 )
@@ -472,37 +470,11 @@ def _trace_pair(
     pixel_mm: tuple[float, float],
     intensity: tuple[str, str],
 ) -> tuple[Centerline2D, Centerline2D]:
-    """Both views' traces (A, B). Where both files are display-processed (tag DISP,
-    DRM, ...) and neither mapping is set by the user, each view is traced as lin and
-    as log, and the mapping under which the two views' median radii agree
-    (:func:`recon.intensity.agreeing_mapping`) is used for both; failing that, or if a
-    trace fails under the other mapping, each view keeps its own choice."""
-    views = range(2)
+    """Both views' traces (A, B), each by :func:`_trace`."""
     names = ("A", "B")
-    own = [_trace(angios[k], clicks_px[k], vmaps[k], names[k], pixel_mm[k], intensity[k])
-           for k in views]
-    tags = [a.info.get("pixel_intensity_relationship") for a in angios]
-    if tuple(intensity) != ("auto", "auto") or not all(is_display_processed(t) for t in tags):
-        return own[0], own[1]
-    traces = {m: [cl if cl.intensity_mapping == m else None for cl in own]
-              for m in ("lin", "log")}
-    try:
-        for m, per_view in traces.items():
-            for k in views:
-                if per_view[k] is None:
-                    mapping = dataclasses.replace(  # m, with the tag as its reason
-                        resolve_mapping(angios[k].image, tags[k], m, vesselness=vmaps[k]),
-                        reason=f"PixelIntensityRelationship is {tags[k]}")
-                    per_view[k] = _trace(angios[k], clicks_px[k], vmaps[k], names[k],
-                                         pixel_mm[k], mapping)
-    except CoronaryError:
-        return own[0], own[1]
-    radius_mm = {m: tuple(float(np.nanmedian(cl.radius_px)) * pixel_mm[k]
-                          for k, cl in enumerate(per_view)) for m, per_view in traces.items()}
-    chosen, why = agreeing_mapping(radius_mm)
-    picked = own if chosen is None else traces[chosen]
-    return tuple(dataclasses.replace(cl, intensity_reason=f"{cl.intensity_reason}; {why}")
-                 for cl in picked)
+    cl_a, cl_b = (_trace(angios[k], clicks_px[k], vmaps[k], names[k], pixel_mm[k], intensity[k])
+                  for k in range(2))
+    return cl_a, cl_b
 
 
 def _trace(
@@ -513,10 +485,16 @@ def _trace(
     pixel_mm: float,
     intensity: str | IntensityMapping,
 ) -> Centerline2D:
-    """One view's trace, with the intensity mapping resolved once for its image (or given)."""
+    """One view's trace, with the intensity mapping resolved once for its image (or given).
+
+    A display-processed file (tag DISP, DRM, ...) with the mapping left to "auto" is
+    neither "lin" nor "log": its radius is fitted under the Box-Cox power that the
+    trace's own profiles fit best (:func:`recon.centerline.trace_segment` given "auto").
+    """
     relationship = angio.info.get("pixel_intensity_relationship")
-    mapping = intensity if isinstance(intensity, IntensityMapping) else resolve_mapping(
-        angio.image, relationship, intensity, vesselness=vmap)
+    fit_power = intensity == "auto" and is_display_processed(relationship)
+    mapping = intensity if isinstance(intensity, IntensityMapping) or fit_power else \
+        resolve_mapping(angio.image, relationship, intensity, vesselness=vmap)
     return trace_segment(
         angio.image,
         clicks_px,

@@ -221,8 +221,7 @@ def _evaluate_varied_view(image: np.ndarray, view: ViewGeometry, clicks_px: np.n
     """One trace of the varied suite, given the image's vesselness ``vmap``, against the
     truth; raises what the tracing raises. The view is traced as the pipeline traces
     each view (``recon.pipeline._trace``: the intensity mapping resolved once on the
-    whole image, then the trace); the pipeline's rule for a display-processed pair (one
-    mapping for both views) needs both views and is not in this figure."""
+    whole image, or a display-processed file's Box-Cox power fitted on the trace)."""
     from recon.pipeline import _trace
 
     pixel_mm = view.pixel_mm_at_isocenter
