@@ -35,6 +35,7 @@ __all__ = [
     "info_markdown",
     "marks_markdown",
     "results_markdown",
+    "segments_lines",
 ]
 
 NO_RECONSTRUCTION_TEXT = "No reconstruction yet."
@@ -100,6 +101,7 @@ def marks_markdown(state: MarkState, last_click_ms: float, autosave_path: str | 
     seeds = state.to_seeds()
     lines = [f"**{len(state.marks)} marks**: {len(seeds.segments)} complete segment(s), "
              f"{len(seeds.features)} feature pair(s)."]
+    lines += segments_lines(state)
     lines += [f"- {m}" for m in state.missing()[:6]]
     if state.last_message:
         lines.append(f"- ⚠ {state.last_message}")
@@ -107,6 +109,20 @@ def marks_markdown(state: MarkState, last_click_ms: float, autosave_path: str | 
         lines.append(f"\nLast click → epipolar line: {last_click_ms:.1f} ms (server).")
     lines.append(f"\nAutosave: `{autosave_path}`")
     return "\n".join(lines)
+
+
+def segments_lines(state: MarkState) -> list[str]:
+    """One line per segment when there are several: its name (the current one marked),
+    and for a branch the segment it leaves and the landmark where it leaves it."""
+    if len(state.segment_names) < 2:
+        return []
+    lines = ["\nSegments (the tree):"]
+    for k, name in enumerate(state.segment_names):
+        shown = f"**{name}** (current)" if k == state.current_segment else name
+        link = state.parent_of(name)
+        lines.append(f"- {shown}" + ("" if link is None else
+                                      f" ↳ branch of {link[0]} at landmark {link[1]}"))
+    return lines
 
 
 def calibration_markdown(res: CalibrationResult) -> str:
