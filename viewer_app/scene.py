@@ -252,6 +252,13 @@ def update_image(v: View) -> None:
     v.nodes.image.image = rgb_from_image(v.angio.image, v.level, v.width)
 
 
+#: Where a mark's label goes (offset from the mark in scene units, anchor): below right;
+#: for a second mark on the same spot above right, for a third on the left.
+LABEL_PLACES = ((np.array([0.008, 0.008, 0.0]), "top-left"),
+                (np.array([0.008, -0.008, 0.0]), "bottom-left"),
+                (np.array([-0.008, 0.0, 0.0]), "center-right"))
+
+
 def draw_marks(scene: viser.SceneApi, views: Mapping[str, View], st: MarkState) -> None:
     """Marks, labels, selection and the epipolar line of the selected mark."""
     sel = st.selected
@@ -267,12 +274,16 @@ def draw_marks(scene: viser.SceneApi, views: Mapping[str, View], st: MarkState) 
         v.nodes.selected.points = sel_pts.astype(np.float32)
         for h in v.nodes.labels:
             h.remove()
+        # A mark on the same spot as an earlier one (a branch's start on its bifurcation
+        # landmark) is labelled on another side of it: the two labels drew over each other.
+        same = np.linalg.norm(pts[:, None, :2] - pts[None, :, :2], axis=2) < 1e-4
+        earlier = np.tril(same, -1).sum(axis=1)
         v.nodes.labels = [
             scene.add_label(
                 f"{overlay_name(v.key)}/labels/m{m.id}", st.label(m),
-                position=tuple(p + np.array([0.008, 0.008, 0.0])), anchor="top-left",
-                font_screen_scale=0.8)
-            for m, p in zip(marks, pts, strict=True)
+                position=tuple(p + LABEL_PLACES[min(j, 2)][0]),
+                anchor=LABEL_PLACES[min(j, 2)][1], font_screen_scale=0.8)
+            for m, p, j in zip(marks, pts, earlier, strict=True)
         ]
         if epi is not None and epi[0] == v.key:
             seg = v.local_from_px(epi[1], z=OVERLAY_Z * 1.5)[None]

@@ -8,7 +8,8 @@ colour of :data:`BRANCH_COLORS`: its back-projected 3D centerline (thick) over
 its 2D trace (thin) on both images, named at its distal end; in 3D the tree's
 one watertight mesh coloured by the nearest branch, each branch's centerline
 in a darker shade of its colour. The branch shown (the one whose table and
-chart the results panel holds) has the thicker lines and its MLD marked.
+chart the results panel holds) has the thicker lines, its MLD marked and its
+part of the mesh in full colour (the others' paler).
 """
 
 from __future__ import annotations
@@ -54,6 +55,7 @@ __all__ = [
     "draw_tree",
     "highlight_branch",
     "is_tree",
+    "mesh_colors",
     "run_reconstruction",
     "seeds_for_run",
     "show_branch",
@@ -74,6 +76,7 @@ BRANCH_COLORS: tuple[tuple[str, tuple[int, int, int]], ...] = (
     ("lime", (185, 235, 60)),
     ("sky blue", (110, 185, 255)),
 )
+FADE, FADE_TO = 0.6, (210, 210, 210)  # the mesh of the branches not shown: paler
 CENTERLINE_SHADE = 0.55  # a branch's 3D centerline: its colour darkened to this fraction
 THIN_PX, THICK_PX, SHOWN_PX = 1.2, 2.5, 4.5  # trace, back-projection, the shown branch's
 
@@ -149,7 +152,7 @@ def branch_heading(result: Result, shown: int) -> str:
                        for k, n in enumerate(names) if k != shown)
     return (f"**Branch shown: {names[shown]}** "
             f"({BRANCH_COLORS[shown % len(BRANCH_COLORS)][0]}{where}). Choose another "
-            f"under **Segment** (Marks, or Branch below): {others}.")
+            f"under **Branch** above (or Segment, in Marks): {others}.")
 
 
 def show_result(scene: viser.SceneApi, views: Mapping[str, View], panels: Panels,
@@ -187,27 +190,15 @@ def draw_tree(scene: viser.SceneApi, views: Mapping[str, View], tree: TreeRecons
               shown: int) -> ModelNodes:
     """Every branch on both images and the tree in 3D (module docstring); branch ``shown``
     highlighted, its MLD and lesion ends marked. Returns the model's nodes."""
-    from scipy.spatial import cKDTree
-
     draw_refusal(scene, views, None)
     for v in views.values():  # the one-segment trace and back-projection are not used
         v.nodes.trace.points = np.zeros((0, 2, 3), np.float32)
         v.nodes.backproj.points = np.zeros((0, 2, 3), np.float32)
     draw_flagged(scene, views, tree)
     parts = branches_of(tree)
-    mesh = tree.tree_surface.mesh.copy()
-    T, model_position, centre = model_placement(np.asarray(mesh.vertices),
+    T, model_position, centre = model_placement(np.asarray(tree.tree_surface.mesh.vertices),
                                                 parts[0].view_a.R_view_from_world, views)
-    X_all = np.vstack([b.centerline_3d.X_world for b in parts])
-    owner = np.concatenate([np.full(len(b.centerline_3d.X_world), k)
-                            for k, b in enumerate(parts)])
-    _, nearest = cKDTree(X_all).query(np.asarray(mesh.vertices))
-    palette = np.array([branch_color(k) for k in range(len(parts))], np.uint8)
-    colors = palette[owner[nearest]]
-    mesh.apply_transform(T)
-    mesh.visual.vertex_colors = np.column_stack([colors, np.full(len(colors), 255, np.uint8)])
     root = scene.add_frame("/model", show_axes=False)
-    scene.add_mesh_trimesh("/model/mesh", mesh, cast_shadow=False, receive_shadow=False)
     scene.add_label("/model/title", f"3D tree, {len(parts)} branches, coloured as on the "
                     "images; drag to rotate\nthe chart shows the branch chosen under Segment",
                     position=(model_position[0],
@@ -218,13 +209,35 @@ def draw_tree(scene: viser.SceneApi, views: Mapping[str, View], tree: TreeRecons
     return model
 
 
+def mesh_colors(tree: TreeReconstruction, shown: int) -> NDArray[np.uint8]:
+    """RGB (V, 3) of the tree mesh's vertices: the colour of the branch whose 3D
+    centerline is nearest, faded towards grey (:data:`FADE`) but for branch ``shown``."""
+    from scipy.spatial import cKDTree
+
+    parts = branches_of(tree)
+    X_all = np.vstack([b.centerline_3d.X_world for b in parts])
+    owner = np.concatenate([np.full(len(b.centerline_3d.X_world), k)
+                            for k, b in enumerate(parts)])
+    _, nearest = cKDTree(X_all).query(np.asarray(tree.tree_surface.mesh.vertices))
+    palette = np.array([branch_color(k) for k in range(len(parts))], float)
+    faded = (1.0 - FADE) * palette + FADE * np.array(FADE_TO, float)
+    faded[shown] = palette[shown]
+    return faded[owner[nearest]].round().astype(np.uint8)
+
+
 def highlight_branch(scene: viser.SceneApi, views: Mapping[str, View],
                      tree: TreeReconstruction, model: ModelNodes, shown: int) -> None:
-    """Each branch's lines on both images and in 3D, with their names; branch ``shown``
-    thicker, with its MLD and lesion ends marked (scene.draw_lesion_marks)."""
+    """The tree's mesh (mesh_colors: branch ``shown`` in full colour), each branch's lines
+    on both images and in 3D with their names, branch ``shown``'s thicker and its MLD and
+    lesion ends marked (scene.draw_lesion_marks)."""
     parts = branches_of(tree)
     names = branch_names(tree)
     T = model.T_scene_from_world
+    mesh = tree.tree_surface.mesh.copy()
+    mesh.apply_transform(T)
+    colors = mesh_colors(tree, shown)
+    mesh.visual.vertex_colors = np.column_stack([colors, np.full(len(colors), 255, np.uint8)])
+    scene.add_mesh_trimesh("/model/mesh", mesh, cast_shadow=False, receive_shadow=False)
     for k, (part, name) in enumerate(zip(parts, names, strict=True)):
         rgb, wide = branch_color(k), SHOWN_PX if k == shown else THICK_PX
         X = np.asarray(part.centerline_3d.X_world, dtype=float)
@@ -237,13 +250,16 @@ def highlight_branch(scene: viser.SceneApi, views: Mapping[str, View],
             back = v.local_from_px(geom.project(X), z=OVERLAY_Z * 1.2)
             scene.add_line_segments(f"{root}/backproj", polyline_segments(back).astype(
                 np.float32), rgb, thickness=wide, thickness_units="screen")
-            scene.add_label(f"{root}/name", name, position=tuple(back[-1] + [0.006, 0.0, 0.0]),
-                            anchor="center-left", font_screen_scale=0.8)
+            # above right of the distal end (its mark's label is below right)
+            scene.add_label(f"{root}/name", name,
+                            position=tuple(back[-1] + [0.008, -0.008, 0.0]),
+                            anchor="bottom-left", font_screen_scale=0.8)
         X_scene = X @ T[:3, :3].T + T[:3, 3]
         scene.add_line_segments(f"/model/branches/b{k}", polyline_segments(X_scene).astype(
             np.float32), _shade(rgb, CENTERLINE_SHADE), thickness=wide,
             thickness_units="screen")
+        middle = X_scene[len(X_scene) // 2]  # the ends hold the bifurcations and the MLD
         scene.add_label(f"/model/branch_names/b{k}", name,
-                        position=tuple(X_scene[-1] + [0.02, 0.0, 0.0]), anchor="center-left")
+                        position=tuple(middle + [0.025, 0.0, 0.0]), anchor="center-left")
     rec = parts[shown]
     draw_lesion_marks(scene, views, rec, model, automatic_marks(rec), rec.measurements.mld_mm)
