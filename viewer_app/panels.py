@@ -450,7 +450,7 @@ def _marks_panel(gui: viser.GuiApi, app: ViewerApp, refreshing: Refreshing) -> M
         async def _(event: viser.GuiEvent) -> None:
             if refreshing.active or event.client is None:
                 return
-            app.set_segment(segment.value)
+            app.guard("Segment", event.client, lambda: app.set_segment(segment.value))
 
         new_segment = gui.add_button("New segment", icon=viser.Icon.PLUS)
 
@@ -596,7 +596,7 @@ def _results_panel(gui: viser.GuiApi, app: ViewerApp, refreshing: Refreshing) ->
         async def _(event: viser.GuiEvent) -> None:
             if refreshing.active or event.client is None:
                 return
-            app.set_segment(str(branch.value))
+            app.guard("Branch", event.client, lambda: app.set_segment(str(branch.value)))
 
         branch_note = gui.add_markdown("", visible=False)
         clinical = gui.add_markdown("")
