@@ -63,8 +63,6 @@ __all__ = [
     "summary_text",
 ]
 
-FloatArray = NDArray[np.float64]
-
 #: (name, RGB) of the branches' colours, in segment order (then again from the first):
 #: bright on a grey angiogram, and apart from the marks' green / yellow / red / cyan,
 #: the magenta epipolar line and the red flagged stretches.
@@ -117,8 +115,9 @@ def run_reconstruction(view_a: View, view_b: View, seeds: Seeds, segment: int,
                        limits: tuple[float | None, float | None],
                        progress: Callable[[str, float], None]) -> Result:
     """Reconstruct the marks in a child process under ``limits`` (memory GB, CPU s): the
-    whole tree when ``seeds`` has several segments, else segment ``segment``; the same
-    options as ``coronary3d reconstruct``'s matcher and optimizer of the viewer."""
+    whole tree when ``seeds`` has several segments, else segment ``segment``. The viewer's
+    options: matcher match3, PALM calibration, each view's stored-values choice
+    (``intensity``: "a" / "b" -> lin, log or auto)."""
     from recon.io.isolated import run_isolated
     from recon.pipeline import ReconstructionOptions
 
@@ -183,6 +182,7 @@ def show_branch(scene: viser.SceneApi, views: Mapping[str, View], panels: Panels
 
 
 def _shade(rgb: tuple[int, int, int], fraction: float) -> tuple[int, int, int]:
+    """``rgb`` darkened to ``fraction`` of its brightness."""
     return tuple(int(round(c * fraction)) for c in rgb)
 
 
@@ -200,7 +200,7 @@ def draw_tree(scene: viser.SceneApi, views: Mapping[str, View], tree: TreeRecons
                                                 parts[0].view_a.R_view_from_world, views)
     root = scene.add_frame("/model", show_axes=False)
     scene.add_label("/model/title", f"3D tree, {len(parts)} branches, coloured as on the "
-                    "images; drag to rotate\nthe chart shows the branch chosen under Segment",
+                    "images; drag to rotate\nthe chart is of the branch chosen under Branch",
                     position=(model_position[0],
                               model_position[1] - MODEL_SIZE / 2 - 0.04, 0.0),
                     anchor="top-center")
@@ -235,31 +235,32 @@ def highlight_branch(scene: viser.SceneApi, views: Mapping[str, View],
     T = model.T_scene_from_world
     mesh = tree.tree_surface.mesh.copy()
     mesh.apply_transform(T)
-    colors = mesh_colors(tree, shown)
-    mesh.visual.vertex_colors = np.column_stack([colors, np.full(len(colors), 255, np.uint8)])
+    colors_rgb = mesh_colors(tree, shown)
+    mesh.visual.vertex_colors = np.column_stack([colors_rgb,
+                                                 np.full(len(colors_rgb), 255, np.uint8)])
     scene.add_mesh_trimesh("/model/mesh", mesh, cast_shadow=False, receive_shadow=False)
     for k, (part, name) in enumerate(zip(parts, names, strict=True)):
-        rgb, wide = branch_color(k), SHOWN_PX if k == shown else THICK_PX
-        X = np.asarray(part.centerline_3d.X_world, dtype=float)
+        rgb, thickness_px = branch_color(k), SHOWN_PX if k == shown else THICK_PX
+        X_world = np.asarray(part.centerline_3d.X_world, dtype=float)
         for key, cl, geom in (("a", part.centerline_a, part.view_a),
                               ("b", part.centerline_b, part.view_b)):
             v, root = views[key], f"{overlay_name(key)}/branches/b{k}"
             scene.add_line_segments(f"{root}/trace", polyline_segments(v.local_from_px(
                 cl.points_px, z=OVERLAY_Z * 0.8)).astype(np.float32), rgb,
                 thickness=THIN_PX, thickness_units="screen")
-            back = v.local_from_px(geom.project(X), z=OVERLAY_Z * 1.2)
-            scene.add_line_segments(f"{root}/backproj", polyline_segments(back).astype(
-                np.float32), rgb, thickness=wide, thickness_units="screen")
+            back_local = v.local_from_px(geom.project(X_world), z=OVERLAY_Z * 1.2)
+            scene.add_line_segments(f"{root}/backproj", polyline_segments(back_local).astype(
+                np.float32), rgb, thickness=thickness_px, thickness_units="screen")
             # above right of the distal end (its mark's label is below right)
             scene.add_label(f"{root}/name", name,
-                            position=tuple(back[-1] + [0.008, -0.008, 0.0]),
+                            position=tuple(back_local[-1] + [0.008, -0.008, 0.0]),
                             anchor="bottom-left", font_screen_scale=0.8)
-        X_scene = X @ T[:3, :3].T + T[:3, 3]
+        X_scene = X_world @ T[:3, :3].T + T[:3, 3]
         scene.add_line_segments(f"/model/branches/b{k}", polyline_segments(X_scene).astype(
-            np.float32), _shade(rgb, CENTERLINE_SHADE), thickness=wide,
+            np.float32), _shade(rgb, CENTERLINE_SHADE), thickness=thickness_px,
             thickness_units="screen")
-        middle = X_scene[len(X_scene) // 2]  # the ends hold the bifurcations and the MLD
+        middle_scene = X_scene[len(X_scene) // 2]  # the ends hold the bifurcations, the MLD
         scene.add_label(f"/model/branch_names/b{k}", name,
-                        position=tuple(middle + [0.025, 0.0, 0.0]), anchor="center-left")
+                        position=tuple(middle_scene + [0.025, 0.0, 0.0]), anchor="center-left")
     rec = parts[shown]
     draw_lesion_marks(scene, views, rec, model, automatic_marks(rec), rec.measurements.mld_mm)
