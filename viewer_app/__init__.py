@@ -2,7 +2,8 @@
 
 ``run_viewer`` serves the app (``coronary3d view``); ``ViewerApp`` is the app
 itself, driven by tests through its public methods. Inside: ``app`` (the
-server and its commands), ``scene`` (the 3D scene), ``panels`` (the GUI),
+server and its commands), ``scene`` (the 3D scene), ``tree_view`` (a vessel
+tree's reconstruction and drawing), ``panels`` (the GUI),
 ``results`` and ``plot`` (the panels' texts and chart, pure), ``state`` (the
 GUI-free state: marks, undo, seeds, epipolar lines, autosave).
 """

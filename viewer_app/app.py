@@ -30,12 +30,13 @@ from recon.errors import LoadError, OutputError
 from recon.io import demo_paths, load_angiogram, load_seeds, save_seeds
 from recon.seeds import Seeds
 from recon.types import Angiogram
-from viewer_app import scene
+from viewer_app import scene, tree_view
 from viewer_app.access import PATCHED_VISER_VERSION, FileAccess, ServerGuard, guarded_serve
 from viewer_app.camera import PageCameras
 from viewer_app.catheter import CatheterTool
 from viewer_app.exports import EXPORT_KINDS, export_bytes, export_name
 from viewer_app.panels import Panels, build_panels
+from viewer_app.progress import loading_notes
 from viewer_app.results import close_views_warning
 from viewer_app.scene import LAYOUTS, ModelNodes, View
 from viewer_app.state import (
@@ -49,6 +50,7 @@ if TYPE_CHECKING:
     from recon.calibration import CalibrationResult
     from recon.io.overrides import GeometryOverrides
     from recon.pipeline import Reconstruction
+    from viewer_app.tree_view import Result
 
 __all__ = ["ViewerApp", "EXPORT_KINDS"]
 
@@ -110,7 +112,8 @@ class ViewerApp:
         self.notifications: list[tuple[str, str, str]] = []  # (level, title, body)
         self.last_click_ms: float = float("nan")
         self.clicks_handled = 0  # image clicks the server has finished with (marks or not)
-        self.reconstruction: Reconstruction | None = None
+        self.reconstruction: Result | None = None  # one segment's, or a tree's (all segments)
+        self.shown_branch = 0  # index in its branches of the one the results panel shows
         self.calibration: CalibrationResult | None = None
         self.progress_log: list[tuple[str, float]] = []
         self._tmpdir = tempfile.TemporaryDirectory(prefix="coronary3d-viewer-")
@@ -454,11 +457,19 @@ class ViewerApp:
             self._redraw_marks()
 
     def set_segment(self, name: str) -> None:
-        """Make the segment called ``name`` the current one (an unknown name is ignored)."""
+        """Make the segment called ``name`` the current one (an unknown name is ignored);
+        after a tree's Reconstruct its branch's table, chart and marks are shown."""
         with self._lock:
             names = self.state.segment_names
             if name in names:
                 self.state.set_current_segment(names.index(name))
+                self._redraw_marks()
+            rec = self.reconstruction
+            if self.model is not None and tree_view.is_tree(rec) \
+                    and name in tree_view.branch_names(rec):
+                self.shown_branch, self.lesion = tree_view.branch_names(rec).index(name), None
+                tree_view.show_branch(self.server.scene, self.views, self.panels, rec,
+                                      self.model, self.shown_branch)
 
     def new_segment(self, name: str | None = None) -> int:
         with self._lock:
@@ -466,6 +477,19 @@ class ViewerApp:
             self._redraw_marks()
             self._autosave()
             return index
+
+    def new_branch(self, client: object | None = None) -> int | None:
+        """A branch of the current segment leaving it at the selected landmark (state's
+        ``new_branch``); its index, or None with a notification saying what to click."""
+
+        def run() -> int:
+            with self._lock:
+                index = self.state.new_branch()
+                self._redraw_marks()
+                self._autosave()
+                return index
+
+        return self.guard("New branch", client, run)
 
     def select(self, mark_id: int | None) -> None:
         with self._lock:
@@ -549,15 +573,6 @@ class ViewerApp:
             log.warning("autosave failed: %s", exc)
 
     # ================================================================ compute
-    def _seeds_for_run(self) -> tuple[Seeds, int]:
-        seeds = self.state.to_seeds()
-        if not seeds.segments:
-            missing = "; ".join(self.state.missing()[:3])
-            raise ValueError(f"marks: no complete segment yet ({missing})")
-        name = self.state.segment_names[self.state.current_segment]
-        names = [s.name for s in seeds.segments]
-        return seeds, names.index(name) if name in names else 0
-
     def calibrate(self, client: object | None = None) -> CalibrationResult | None:
         """PALM calibration of view B on the marks; returns the CalibrationResult or None."""
 
@@ -565,7 +580,7 @@ class ViewerApp:
             from recon.pipeline import calibrate_from_seeds
 
             with self._lock:
-                seeds, segment = self._seeds_for_run()
+                seeds, segment = tree_view.seeds_for_run(self.state)
                 a, b = self.views["a"].angio, self.views["b"].angio
             maps = (self.views["a"].get_vesselness(), self.views["b"].get_vesselness())
             # The same traced ends as Reconstruct's calibration step: the same figures.
@@ -583,21 +598,16 @@ class ViewerApp:
 
         return self.guard("Calibrate", client, run)
 
-    def reconstruct(self, client: object | None = None) -> Reconstruction | None:
-        """Run recon.pipeline.reconstruct_pair on the marks (in a child process, under
-        ``self.limits``: recon.io.isolated); draw and tabulate the result."""
+    def reconstruct(self, client: object | None = None) -> Result | None:
+        """Reconstruct the marks in a child process, under ``self.limits``
+        (recon.io.isolated): the current segment if one segment is complete, else every
+        complete segment as one tree (recon.tree); draw and tabulate the result."""
         if self._busy:
             self.notify("Busy", "a reconstruction is already running", "warning", client)
             return None
         clients = [client] if client is not None else list(self.server.get_clients().values())
-        handles = []
-        for c in clients:
-            try:
-                handles.append(c.add_notification("Reconstructing", "starting", loading=True,
-                                                  with_close_button=False))
-            except Exception:
-                log.debug("notification failed", exc_info=True)
         self.progress_log = []
+        handles: list = []
 
         def progress(stage: str, fraction: float) -> None:
             self.progress_log.append((stage, float(fraction)))
@@ -605,48 +615,30 @@ class ViewerApp:
             for h in handles:
                 h.body = f"{stage} ({fraction * 100:.0f} %)"
 
-        def run() -> Reconstruction:
-            from recon.io.isolated import run_isolated
-            from recon.pipeline import ReconstructionOptions
-
+        def run() -> Result:
             with self._lock:
-                seeds, segment = self._seeds_for_run()
+                seeds, segment = tree_view.seeds_for_run(self.state)
                 view_a, view_b = self.views["a"], self.views["b"]
-            options = ReconstructionOptions(
-                matcher="match3",
-                optimizer="palm",
-                segment=segment,
-                intensity_a=self.intensity["a"],
-                intensity_b=self.intensity["b"],
-            )
-            maps = (view_a.get_vesselness(), view_b.get_vesselness())  # cached for snapping
-            # in a process of its own, under the job's memory and CPU-time limits
-            rec = run_isolated("recon.io.isolated:reconstruct_limited",
-                               (view_a.angio, view_b.angio, seeds, options, maps, *self.limits),
-                               progress=progress)
+            rec = tree_view.run_reconstruction(view_a, view_b, seeds, segment, self.intensity,
+                                               self.limits, progress)
             with self._lock:
                 self.reconstruction = rec
                 self.calibration = rec.calibration
-                self.state.set_calibrated_b(rec.view_b)
+                self.state.set_calibrated_b(tree_view.branches_of(rec)[0].view_b)
                 self.state.select(None)  # no guide line across the results
                 self.panels.show_calibration(rec.calibration)
                 self._show_reconstruction(rec)
                 self._redraw_marks()
-            self.notify("Reconstructed", f"{rec.centerline_3d.length_mm:.1f} mm centerline, "
-                        f"{len(rec.surface.mesh.faces)} faces, "
-                        f"{rec.timings_ms.get('total', 0):.0f} ms", "success", client)
+            self.notify("Reconstructed", tree_view.summary_text(rec), "success", client)
             return rec
 
         self._busy = True
         try:
-            return self.guard("Reconstruct", client, run)
+            with loading_notes(clients, "Reconstructing") as notes:
+                handles += notes
+                return self.guard("Reconstruct", client, run)
         finally:
             self._busy = False
-            for h in handles:
-                try:
-                    h.remove()
-                except Exception:
-                    log.debug("notification removal failed", exc_info=True)
 
     def _clear_results(self) -> None:
         scene.clear_results(self.server.scene, self.views)
@@ -654,12 +646,22 @@ class ViewerApp:
         self.lesion = None
         self.panels.clear_results()
 
-    def _show_reconstruction(self, rec: Reconstruction) -> None:
-        """Traces, back-projections and lesion marks on the images, the coloured mesh,
-        the results table and the profile; the page shows the angiograms and the model."""
-        self.model = scene.draw_reconstruction(self.server.scene, self.views, rec)
-        self.panels.show_reconstruction(rec)
+    def _show_reconstruction(self, rec: Result) -> None:
+        """Traces, back-projections and lesion marks on the images, the coloured mesh (a
+        tree's: each branch in its colour, the current segment's shown), the results
+        table and the profile; the page shows the angiograms and the model."""
+        current = self.state.segment_names[self.state.current_segment]
+        self.model, self.shown_branch = tree_view.show_result(
+            self.server.scene, self.views, self.panels, rec, current)
+        self.lesion = None
         self.set_layout("Angiograms + 3D")
+
+    @property
+    def branch(self) -> Reconstruction | None:
+        """The reconstruction the results panel shows: the one segment's, or the tree's
+        branch chosen under Segment (None before any Reconstruct)."""
+        rec = self.reconstruction
+        return None if rec is None else tree_view.branches_of(rec)[self.shown_branch]
 
     def set_lesion(self, start_mm: float, end_mm: float,
                    reference_mm: tuple[float, float] | None = None) -> dict[str, float]:
@@ -668,7 +670,7 @@ class ViewerApp:
         from viewer_app.results import lesion_measurements
 
         with self._lock:
-            rec = self.reconstruction
+            rec = self.branch
             if rec is None or self.model is None:
                 raise ValueError("lesion: reconstruct first")
             lesion = lesion_measurements(rec.profile, start_mm, end_mm, reference_mm)

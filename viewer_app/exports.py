@@ -13,10 +13,11 @@ from recon.io import MESH_FORMATS, outputs_as_bytes
 if TYPE_CHECKING:
     from recon.pipeline import Reconstruction
     from recon.seeds import Seeds
+    from recon.tree import TreeReconstruction
 
 __all__ = ["EXPORT_KINDS", "export_bytes", "export_name"]
 
-EXPORT_KINDS = (*MESH_FORMATS, "centerline.csv", "report.json", "seeds.json")
+EXPORT_KINDS = (*MESH_FORMATS, "centerline.csv", "centerline.vtp", "report.json", "seeds.json")
 
 
 def export_name(kind: str) -> str:
@@ -24,9 +25,12 @@ def export_name(kind: str) -> str:
     return f"mesh.{kind}" if kind in MESH_FORMATS else kind
 
 
-def export_bytes(kind: str, reconstruction: Reconstruction | None, seeds: Seeds) -> bytes:
+def export_bytes(kind: str, reconstruction: Reconstruction | TreeReconstruction | None,
+                 seeds: Seeds) -> bytes:
     """Bytes of an output: a mesh format ("stl", "obj", "ply", "glb"), "centerline.csv",
-    "report.json" or "seeds.json" (the marks; needs no reconstruction).
+    "centerline.vtp", "report.json" or "seeds.json" (the marks; needs no reconstruction).
+    A tree's are the command line's for it (recon.io.outputs): the whole tree's mesh, its
+    branches in the CSV's ``branch`` column and the VTP's ``BranchId``.
 
     Raises ValueError when there is no reconstruction yet or the kind is unknown.
     """

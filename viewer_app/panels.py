@@ -28,6 +28,7 @@ from viewer_app.plot import profile_plot
 from viewer_app.results import (
     NO_RECONSTRUCTION_TEXT,
     NOT_CALIBRATED_TEXT,
+    bifurcations_markdown,
     calibration_markdown,
     clinical_markdown,
     close_views_warning,
@@ -37,10 +38,12 @@ from viewer_app.results import (
 )
 from viewer_app.scene import LAYOUTS
 from viewer_app.state import MODE_LABELS, MODES
+from viewer_app.tree_view import branch_heading, branch_names, is_tree
 
 if TYPE_CHECKING:
     from recon.calibration import CalibrationResult
     from recon.pipeline import Reconstruction
+    from recon.tree import TreeReconstruction
     from viewer_app.app import ViewerApp
     from viewer_app.scene import View
     from viewer_app.state import MarkState
@@ -106,6 +109,7 @@ class MarksPanel:
     mode: viser.GuiDropdownHandle
     segment: viser.GuiDropdownHandle
     new_segment: viser.GuiButtonHandle
+    new_branch: viser.GuiButtonHandle  # a branch of the current segment at the selected landmark
     select: viser.GuiDropdownHandle
     undo: viser.GuiButtonHandle
     clear: viser.GuiButtonHandle
@@ -152,12 +156,15 @@ class ResultsPanel:
     reconstruct: viser.GuiButtonHandle
     progress: viser.GuiProgressBarHandle
     layout: viser.GuiDropdownHandle  # Angiograms / Angiograms + 3D / 3D model
+    branch: viser.GuiDropdownHandle  # a tree's branch shown (the Segment dropdown's twin)
+    branch_note: viser.GuiMarkdownHandle  # which branch the table and chart are of
     clinical: viser.GuiMarkdownHandle  # the measurements in clinical words
     plot: viser.GuiImageHandle
     lesion_start: viser.GuiSliderHandle  # lesion ends (mm along the vessel), movable
     lesion_end: viser.GuiSliderHandle
     reference_proximal: viser.GuiSliderHandle  # where the reference diameter is read
     reference_distal: viser.GuiSliderHandle
+    bifurcations: viser.GuiMarkdownHandle  # a tree's bifurcation QCA
     markdown: viser.GuiMarkdownHandle  # engineering figures, in a folded folder
 
 
@@ -166,6 +173,7 @@ class ExportPanel:
     mesh_format: viser.GuiDropdownHandle
     mesh: viser.GuiButtonHandle
     centerline_csv: viser.GuiButtonHandle
+    centerline_vtp: viser.GuiButtonHandle
     report_json: viser.GuiButtonHandle
     seeds_json: viser.GuiButtonHandle
 
@@ -243,6 +251,9 @@ class Panels:
                 panel.mode.value = MODE_LABELS[st.mode]
             panel.segment.options = tuple(st.segment_names)
             panel.segment.value = st.segment_names[st.current_segment]
+            branch = self.results.branch
+            if st.segment_names[st.current_segment] in branch.options:
+                branch.value = st.segment_names[st.current_segment]
             options = ["(none)"] + [f"{m.view.upper()} {st.label(m)} #{m.id}" for m in st.marks]
             panel.select.options = tuple(options)
             sel = st.selected
@@ -268,8 +279,23 @@ class Panels:
         r.markdown.content = NO_RECONSTRUCTION_TEXT
         self.calibrate.markdown.content = NOT_CALIBRATED_TEXT
         for h in (r.plot, r.lesion_start, r.lesion_end, r.reference_proximal,
-                  r.reference_distal):
+                  r.reference_distal, r.branch, r.branch_note, r.bifurcations):
             h.visible = False
+
+    def show_tree(self, result: Reconstruction | TreeReconstruction, shown: int) -> None:
+        """A tree's results: the Branch dropdown (branch ``shown`` chosen), the line naming
+        the branch shown and the bifurcation table; a one-segment result hides them."""
+        r = self.results
+        tree = is_tree(result)
+        if tree:
+            names = branch_names(result)
+            with self.refreshing.during():
+                r.branch.options = tuple(names)
+                r.branch.value = names[shown]
+        r.branch_note.content = branch_heading(result, shown) if tree else ""
+        r.bifurcations.content = bifurcations_markdown(result) if tree else ""
+        for h in (r.branch, r.branch_note, r.bifurcations):
+            h.visible = tree
 
     def show_reconstruction(self, rec: Reconstruction) -> None:
         """The clinical table, the diameter chart with its lesion sliders, the details."""
@@ -424,13 +450,21 @@ def _marks_panel(gui: viser.GuiApi, app: ViewerApp, refreshing: Refreshing) -> M
         async def _(event: viser.GuiEvent) -> None:
             if refreshing.active or event.client is None:
                 return
-            app.set_segment(segment.value)
+            app.guard("Segment", event.client, lambda: app.set_segment(segment.value))
 
         new_segment = gui.add_button("New segment", icon=viser.Icon.PLUS)
 
         @new_segment.on_click
         async def _(event: viser.GuiEvent) -> None:
             app.new_segment()
+
+        new_branch = gui.add_button("New branch from landmark", icon=viser.Icon.GIT_BRANCH,
+                                    hint="A branch of the current segment, leaving it at "
+                                    "the selected landmark (clicked in A and B)")
+
+        @new_branch.on_click
+        async def _(event: viser.GuiEvent) -> None:
+            app.new_branch(client=event.client)
 
         select = gui.add_dropdown("Selected mark", ["(none)"])
 
@@ -455,8 +489,8 @@ def _marks_panel(gui: viser.GuiApi, app: ViewerApp, refreshing: Refreshing) -> M
 
         summary = gui.add_markdown("")
     return MarksPanel(warning=warning, guide=guide, mode=mode, segment=segment,
-                      new_segment=new_segment, select=select, undo=undo, clear=clear,
-                      summary=summary)
+                      new_segment=new_segment, new_branch=new_branch, select=select,
+                      undo=undo, clear=clear, summary=summary)
 
 
 GEOMETRY_WORDS = {"sid_mm": "SID (mm)", "sod_mm": "SOD (mm)",
@@ -556,6 +590,15 @@ def _results_panel(gui: viser.GuiApi, app: ViewerApp, refreshing: Refreshing) ->
                 return
             app.guard("Show", event.client, lambda: app.set_layout(str(layout.value)))
 
+        branch = gui.add_dropdown("Branch", ["Segment 1"], visible=False)
+
+        @branch.on_update
+        async def _(event: viser.GuiEvent) -> None:
+            if refreshing.active or event.client is None:
+                return
+            app.guard("Branch", event.client, lambda: app.set_segment(str(branch.value)))
+
+        branch_note = gui.add_markdown("", visible=False)
         clinical = gui.add_markdown("")
         plot = gui.add_image(np.full((8, 8, 3), 255, np.uint8),
                              label="Diameter along the vessel", visible=False)
@@ -573,12 +616,15 @@ def _results_panel(gui: viser.GuiApi, app: ViewerApp, refreshing: Refreshing) ->
 
         for slider in (lesion_start, lesion_end, ref_prox, ref_dist):
             slider.on_update(lesion_moved)
+        bifurcations = gui.add_markdown("", visible=False)
         with gui.add_folder("Details (engineering)", expand_by_default=False):
             markdown = gui.add_markdown("")
     return ResultsPanel(reconstruct=reconstruct, progress=progress, layout=layout,
-                        clinical=clinical, plot=plot, lesion_start=lesion_start,
+                        branch=branch, branch_note=branch_note, clinical=clinical,
+                        plot=plot, lesion_start=lesion_start,
                         lesion_end=lesion_end, reference_proximal=ref_prox,
-                        reference_distal=ref_dist, markdown=markdown)
+                        reference_distal=ref_dist, bifurcations=bifurcations,
+                        markdown=markdown)
 
 
 def _export_panel(gui: viser.GuiApi, app: ViewerApp) -> ExportPanel:
@@ -592,10 +638,10 @@ def _export_panel(gui: viser.GuiApi, app: ViewerApp) -> ExportPanel:
 
         buttons = [
             _download_button(gui, app, f"Download {kind}", kind)
-            for kind in ("centerline.csv", "report.json", "seeds.json")
+            for kind in ("centerline.csv", "centerline.vtp", "report.json", "seeds.json")
         ]
     return ExportPanel(mesh_format=mesh_format, mesh=mesh, centerline_csv=buttons[0],
-                       report_json=buttons[1], seeds_json=buttons[2])
+                       centerline_vtp=buttons[1], report_json=buttons[2], seeds_json=buttons[3])
 
 
 def _download_button(gui: viser.GuiApi, app: ViewerApp, label: str,

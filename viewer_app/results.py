@@ -26,6 +26,7 @@ __all__ = [
     "NOT_CALIBRATED_TEXT",
     "NO_RECONSTRUCTION_TEXT",
     "angle_text",
+    "bifurcations_markdown",
     "branch_stretches",
     "calibration_markdown",
     "clinical_markdown",
@@ -35,6 +36,7 @@ __all__ = [
     "info_markdown",
     "marks_markdown",
     "results_markdown",
+    "segments_lines",
 ]
 
 NO_RECONSTRUCTION_TEXT = "No reconstruction yet."
@@ -100,6 +102,7 @@ def marks_markdown(state: MarkState, last_click_ms: float, autosave_path: str | 
     seeds = state.to_seeds()
     lines = [f"**{len(state.marks)} marks**: {len(seeds.segments)} complete segment(s), "
              f"{len(seeds.features)} feature pair(s)."]
+    lines += segments_lines(state)
     lines += [f"- {m}" for m in state.missing()[:6]]
     if state.last_message:
         lines.append(f"- ⚠ {state.last_message}")
@@ -107,6 +110,20 @@ def marks_markdown(state: MarkState, last_click_ms: float, autosave_path: str | 
         lines.append(f"\nLast click → epipolar line: {last_click_ms:.1f} ms (server).")
     lines.append(f"\nAutosave: `{autosave_path}`")
     return "\n".join(lines)
+
+
+def segments_lines(state: MarkState) -> list[str]:
+    """One line per segment when there are several: its name (the current one marked),
+    and for a branch the segment it leaves and the landmark where it leaves it."""
+    if len(state.segment_names) < 2:
+        return []
+    lines = ["\nSegments (the tree):"]
+    for k, name in enumerate(state.segment_names):
+        shown = f"**{name}** (current)" if k == state.current_segment else name
+        link = state.parent_of(name)
+        lines.append(f"- {shown}" + ("" if link is None else
+                                      f" ↳ branch of {link[0]} at landmark {link[1]}"))
+    return lines
 
 
 def calibration_markdown(res: CalibrationResult) -> str:
@@ -245,6 +262,35 @@ def branch_stretches(rec: Reconstruction) -> list[dict[str, float | str]]:
                         "start_mm": float(max(s[i] - d_ref, s[0])),
                         "end_mm": float(min(s[i] + 1.5 * d_ref, s[-1]))})
     return sorted(out, key=lambda b: b["s_mm"])
+
+
+def bifurcations_markdown(tree: object) -> str:
+    """The bifurcation QCA of a tree (recon.tree.TreeReconstruction ``bifurcations``), a
+    column per bifurcation: its vessels, Medina class, angles, and the reference diameter
+    and % diameter stenosis of its proximal main, distal main and side branch."""
+    bifs = tuple(getattr(tree, "bifurcations", ()))
+    if not bifs:
+        return ""
+
+    def row(label: str, cells: list[str]) -> str:
+        return f"| {label} | " + " | ".join(cells) + " |"
+
+    parts = (("proximal main", "proximal_main"), ("distal main", "distal_main"),
+             ("side branch", "side_branch"))
+    rows = ["**Bifurcations** (Medina p,d,s: 1 where the proximal main, distal main, side "
+            "branch has ≥ 50 % diameter stenosis)", "",
+            row("", [b.name for b in bifs]), "| --- |" + " --- |" * len(bifs),
+            row("main › side branch", [f"{b.parent} › {b.branch}" for b in bifs]),
+            row("Medina", [f"**{b.medina}**" for b in bifs]),
+            row("Bifurcation angle", [f"{b.bifurcation_angle_deg:.0f}°" for b in bifs]),
+            row("Proximal angle", [f"{b.proximal_angle_deg:.0f}°" for b in bifs])]
+    for label, key in parts:
+        rows.append(row(f"Reference diameter, {label}",
+                        [f"{getattr(b, key).reference_diameter_mm:.2f} mm" for b in bifs]))
+    for label, key in parts:
+        rows.append(row(f"% diameter stenosis, {label}",
+                        [f"{getattr(b, key).diameter_stenosis_pct:.0f} %" for b in bifs]))
+    return "\n".join(rows)
 
 
 def _with_ci(text: str, key: str, ci: dict, digits: int) -> str:

@@ -54,6 +54,7 @@ __all__ = [
     "draw_flagged",
     "draw_refusal",
     "draw_reconstruction",
+    "model_placement",
     "diameter_colors",
     "lesion_points",
     "automatic_marks",
@@ -251,6 +252,13 @@ def update_image(v: View) -> None:
     v.nodes.image.image = rgb_from_image(v.angio.image, v.level, v.width)
 
 
+#: Where a mark's label goes (offset from the mark in scene units, anchor): below right;
+#: for a second mark on the same spot above right, for a third on the left.
+LABEL_PLACES = ((np.array([0.008, 0.008, 0.0]), "top-left"),
+                (np.array([0.008, -0.008, 0.0]), "bottom-left"),
+                (np.array([-0.008, 0.0, 0.0]), "center-right"))
+
+
 def draw_marks(scene: viser.SceneApi, views: Mapping[str, View], st: MarkState) -> None:
     """Marks, labels, selection and the epipolar line of the selected mark."""
     sel = st.selected
@@ -266,12 +274,16 @@ def draw_marks(scene: viser.SceneApi, views: Mapping[str, View], st: MarkState) 
         v.nodes.selected.points = sel_pts.astype(np.float32)
         for h in v.nodes.labels:
             h.remove()
+        # A mark on the same spot as an earlier one (a branch's start on its bifurcation
+        # landmark) is labelled on another side of it: the two labels drew over each other.
+        same = np.linalg.norm(pts[:, None, :2] - pts[None, :, :2], axis=2) < 1e-4
+        earlier = np.tril(same, -1).sum(axis=1)
         v.nodes.labels = [
             scene.add_label(
                 f"{overlay_name(v.key)}/labels/m{m.id}", st.label(m),
-                position=tuple(p + np.array([0.008, 0.008, 0.0])), anchor="top-left",
-                font_screen_scale=0.8)
-            for m, p in zip(marks, pts, strict=True)
+                position=tuple(p + LABEL_PLACES[min(j, 2)][0]),
+                anchor=LABEL_PLACES[min(j, 2)][1], font_screen_scale=0.8)
+            for m, p, j in zip(marks, pts, earlier, strict=True)
         ]
         if epi is not None and epi[0] == v.key:
             seg = v.local_from_px(epi[1], z=OVERLAY_Z * 1.5)[None]
@@ -286,7 +298,8 @@ def clear_results(scene: viser.SceneApi, views: Mapping[str, View]) -> None:
         v.nodes.trace.points = np.zeros((0, 2, 3), np.float32)
         v.nodes.backproj.points = np.zeros((0, 2, 3), np.float32)
     _remove(scene, ["/model"] + [f"{overlay_name(k)}/{n}" for k in views
-                                 for n in ("flagged", "flag_labels", "lesion", "lesion_labels")])
+                                 for n in ("flagged", "flag_labels", "lesion", "lesion_labels",
+                                           "branches")])
     draw_refusal(scene, views, None)
 
 
@@ -372,6 +385,30 @@ def automatic_marks(rec: Reconstruction) -> dict[str, float]:
 MARKER_COLORS = {"MLD": (255, 0, 200), "lesion start": (0, 120, 255), "lesion end": (0, 120, 255)}
 
 
+def model_placement(V_world: FloatArray, R_view_from_world: FloatArray,
+                    views: Mapping[str, View]) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Where the model of points ``V_world`` (N, 3) (mm) goes in the scene.
+
+    In view A's frame (x = columns, y = rows, z = away from the source; its
+    ``R_view_from_world``), so the first look at it matches view A; scaled to
+    MODEL_SIZE, above the images. Returns ``T_scene_from_world`` (4, 4), the
+    centre of its box on the images' plane (3,) and the centre of the model (3,).
+    """
+    V_view = np.asarray(V_world, dtype=float) @ R_view_from_world.T  # mm, view A's axes
+    lo, hi = V_view.min(axis=0), V_view.max(axis=0)
+    scale = MODEL_SIZE / max(float(np.max((hi - lo)[:2])), 1e-6)
+    image_top = -max(v.render_h for v in views.values()) / 2
+    model_position = np.array([0.0, image_top - 0.12 - MODEL_SIZE / 2, 0.0])
+    T = np.eye(4)
+    T[:3, :3] = scale * R_view_from_world
+    T[:3, 3] = model_position - scale * (lo + hi) / 2
+    # Its nearest point on the images' plane, the rest behind it: perspective then
+    # makes no part larger than the framing allows (nothing cut off at the top).
+    T[2, 3] = model_position[2] - scale * lo[2]
+    centre = model_position + np.array([0.0, 0.0, scale * (hi[2] - lo[2]) / 2])
+    return T, model_position, centre
+
+
 def draw_reconstruction(
     scene: viser.SceneApi, views: Mapping[str, View], rec: Reconstruction
 ) -> ModelNodes:
@@ -390,15 +427,9 @@ def draw_reconstruction(
         v.nodes.backproj.points = polyline_segments(
             v.local_from_px(geom.project(X), z=OVERLAY_Z * 1.2)).astype(np.float32)
     draw_flagged(scene, views, rec)
-    # The model in view A's frame (x = columns, y = rows, z = away from the source),
-    # so the first look at it matches view A; scaled to MODEL_SIZE, above the images.
-    R = rec.view_a.R_view_from_world
     mesh = rec.surface.mesh.copy()
-    V_view = np.asarray(mesh.vertices) @ R.T  # mm, view A's (u, v, d) axes
-    lo, hi = V_view.min(axis=0), V_view.max(axis=0)
-    scale = MODEL_SIZE / max(float(np.max((hi - lo)[:2])), 1e-6)
-    image_top = -max(v.render_h for v in views.values()) / 2
-    model_position = np.array([0.0, image_top - 0.12 - MODEL_SIZE / 2, 0.0])
+    T, model_position, centre = model_placement(np.asarray(mesh.vertices),
+                                                rec.view_a.R_view_from_world, views)
     prof = rec.profile
     d_mm = np.interp(s, prof.s_mm, prof.diameter_smooth_mm)
     # Against the local (tapering) reference: a healthy distal vessel stays green.
@@ -407,17 +438,11 @@ def draw_reconstruction(
                                               float(np.nanmax(ref_all))))
     _, nearest = cKDTree(X).query(np.asarray(mesh.vertices))
     colors = diameter_colors(d_mm[nearest], ref_mm[nearest])
-    T = np.eye(4)
-    T[:3, :3] = scale * R
-    T[:3, 3] = model_position - scale * (lo + hi) / 2
-    # Its nearest point on the images' plane, the rest behind it: perspective then
-    # makes no part larger than the framing allows (nothing cut off at the top).
-    T[2, 3] = model_position[2] - scale * lo[2]
     mesh.apply_transform(T)
     mesh.visual.vertex_colors = np.column_stack([colors, np.full(len(colors), 255, np.uint8)])
     root = scene.add_frame("/model", show_axes=False)
     scene.add_mesh_trimesh("/model/mesh", mesh, cast_shadow=False, receive_shadow=False)
-    X_scene = (X @ R.T) * scale + T[:3, 3]
+    X_scene = X @ T[:3, :3].T + T[:3, 3]
     scene.add_line_segments("/model/centerline", polyline_segments(X_scene).astype(
         np.float32), (40, 40, 40), thickness=1.5, thickness_units="screen")
     m = rec.measurements
@@ -428,7 +453,6 @@ def draw_reconstruction(
                     position=(model_position[0], model_position[1] - MODEL_SIZE / 2 - 0.04,
                               0.0),
                     anchor="top-center")
-    centre = model_position + np.array([0.0, 0.0, scale * (hi[2] - lo[2]) / 2])
     model = ModelNodes(root=root, position=centre, T_scene_from_world=T)
     draw_lesion_marks(scene, views, rec, model, automatic_marks(rec), m.mld_mm)
     return model
@@ -437,30 +461,36 @@ def draw_reconstruction(
 def draw_flagged(scene: viser.SceneApi, views: Mapping[str, View], rec: Reconstruction
                  ) -> int:
     """The stretches the cross-view consistency check flagged, in FLAGGED_COLOR on both
-    images (the 3D stretch projected), with a short label on the view it names.
-    Returns the number of stretches drawn."""
-    consistency = getattr(rec, "consistency", None)
-    stretches = tuple(getattr(consistency, "stretches", ()))
-    X = np.asarray(rec.centerline_3d.X_world, dtype=float)
-    s = np.asarray(rec.centerline_3d.s_mm, dtype=float)
-    for key, geom in (("a", rec.view_a), ("b", rec.view_b)):
+    images (the 3D stretch projected), with a short label on the view it names; every
+    branch's of a tree (recon.tree.TreeReconstruction). Returns the number of stretches
+    drawn."""
+    parts = tuple(getattr(rec, "branches", (rec,)))
+    count = 0
+    for key in ("a", "b"):
         v = views[key]
-        segments = []
-        for st in stretches:
-            keep = (s >= st.start_mm - 1e-6) & (s <= st.end_mm + 1e-6)
-            if keep.sum() >= 2:
-                segments.append(polyline_segments(
-                    v.local_from_px(geom.project(X[keep]), z=OVERLAY_Z * 1.4)))
+        segments, named = [], []
+        for part in parts:
+            geom = part.view_a if key == "a" else part.view_b
+            stretches = tuple(getattr(getattr(part, "consistency", None), "stretches", ()))
+            X = np.asarray(part.centerline_3d.X_world, dtype=float)
+            s = np.asarray(part.centerline_3d.s_mm, dtype=float)
+            for st in stretches:
+                keep = (s >= st.start_mm - 1e-6) & (s <= st.end_mm + 1e-6)
+                if keep.sum() >= 2:
+                    segments.append(polyline_segments(
+                        v.local_from_px(geom.project(X[keep]), z=OVERLAY_Z * 1.4)))
+            named += [st for st in stretches if st.view == key]
+            count += len(stretches) if key == "a" else 0
         seg = np.concatenate(segments) if segments else np.zeros((0, 2, 3))
         scene.add_line_segments(f"{overlay_name(key)}/flagged", seg.astype(np.float32),
                                 FLAGGED_COLOR, thickness=5.0, thickness_units="screen")
-        for i, st in enumerate(st for st in stretches if st.view == key):
+        for i, st in enumerate(named):
             p = v.local_from_px(np.array([st.middle_px]), z=OVERLAY_Z * 1.6)[0]
             scene.add_label(f"{overlay_name(key)}/flag_labels/s{i}",
                             f"⚠ {st.kind.replace('_', ' ')} {st.start_mm:.0f}-{st.end_mm:.0f} mm",
                             position=tuple(p + np.array([0.01, -0.01, 0.0])),
                             anchor="bottom-left", font_screen_scale=0.8)
-    return len(stretches)
+    return count
 
 
 #: The ring round the place a refused trace names: this fraction of the image's longer

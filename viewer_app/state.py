@@ -257,9 +257,63 @@ class MarkState:
     def new_segment(self, name: str | None = None) -> int:
         """Start a new segment and make it current; returns its index."""
         self._push()
-        self.segment_names.append(name or f"Segment {len(self.segment_names) + 1}")
+        self.segment_names.append(name or self._free_name())
         self.current_segment = len(self.segment_names) - 1
         return self.current_segment
+
+    def _free_name(self) -> str:
+        """"Segment N" for the next segment (N its number), or the first such name no
+        segment has (a tree's names must differ)."""
+        n = len(self.segment_names) + 1
+        while f"Segment {n}" in self.segment_names:
+            n += 1
+        return f"Segment {n}"
+
+    def new_branch(self, name: str | None = None) -> int:
+        """Start a branch of the current segment at the selected landmark; returns its index.
+
+        The selected mark must be a landmark placed in both views: the bifurcation. The
+        new segment becomes current, its link (parent: the current segment; bifurcation:
+        that landmark's name) goes to :attr:`segment_links`, and its proximal end is
+        placed on the landmark in both views (a branch starts at its bifurcation; the
+        "proximal" mode redoes it). One undo step. Raises ValueError saying what to
+        click first when no such landmark is selected.
+        """
+        mark = self.selected
+        if mark is None or mark.kind != "feature":
+            raise ValueError("New branch: first select the bifurcation landmark: click it in "
+                             "A and in B (mode 'Landmark pair (A and B)'), or pick it under "
+                             "'Selected mark'; the branch leaves the current segment there")
+        partner = self.partner(mark)
+        if partner is None:
+            raise ValueError(f"New branch: landmark {self.label(mark)} is only in "
+                             f"{mark.view.upper()}; click the bifurcation in "
+                             f"{_other(mark.view).upper()} too (on the magenta line)")
+        if name is not None and name in self.segment_names:
+            raise ValueError(f"New branch: a segment is already called {name!r}")
+        parent = self.segment_names[self.current_segment]
+        self._push()
+        name = name or self._free_name()
+        self.segment_names.append(name)
+        index = len(self.segment_names) - 1
+        self.segment_links[name] = (parent, self.feature_name(mark.group))
+        for m in (mark, partner):
+            self.marks.append(Mark(self._next_id, "proximal", m.view, index, m.point_px,
+                                   m.point_px, None))
+            self._next_id += 1
+        self.current_segment = index
+        self.selected_id = None
+        self._guide_id = None
+        return index
+
+    def feature_name(self, group: int) -> str:
+        """The name landmark ``group`` has in the seeds (a seeds file's, else "feature N")."""
+        return self.feature_names.get(group) or f"feature {group + 1}"
+
+    def parent_of(self, name: str) -> tuple[str, str] | None:
+        """(parent segment, bifurcation landmark) of the segment called ``name`` when it is
+        a branch, else None."""
+        return self.segment_links.get(name)
 
     def set_current_segment(self, index: int) -> None:
         if not 0 <= index < len(self.segment_names):
@@ -494,8 +548,8 @@ class MarkState:
         for g in groups:
             pts = {m.view: m.point_px for m in self.marks if m.kind == "feature" and m.group == g}
             if len(pts) == 2:
-                name = self.feature_names.get(g) or f"feature {g + 1}"
-                features.append(Feature(name=name, a_px=pts["a"], b_px=pts["b"]))
+                features.append(Feature(name=self.feature_name(g), a_px=pts["a"],
+                                        b_px=pts["b"]))
         return tuple(features)
 
     def missing(self) -> list[str]:

@@ -43,9 +43,11 @@ if TYPE_CHECKING:
     from recon.centerline import VesselnessMap
     from recon.pipeline import Reconstruction, ReconstructionOptions
     from recon.seeds import Seeds
+    from recon.tree import TreeReconstruction
     from recon.types import Angiogram
 
-__all__ = ["JobFailed", "run_isolated", "start_fork_server", "reconstruct_limited"]
+__all__ = ["JobFailed", "run_isolated", "start_fork_server", "reconstruct_limited",
+           "reconstruct_tree_limited"]
 
 Progress = Callable[[str, float], None]
 _HEADER = struct.Struct("!Q")  # the length of each frame's pickle (fresh interpreter)
@@ -188,7 +190,7 @@ def _fork_server() -> Any:
     """The "forkserver" multiprocessing context, its server preloading the pipeline."""
     if not _SERVER:
         ctx = multiprocessing.get_context("forkserver")
-        ctx.set_forkserver_preload(["recon.io.isolated", "recon.pipeline",
+        ctx.set_forkserver_preload(["recon.io.isolated", "recon.pipeline", "recon.tree",
                                     "recon.io.limits"])
         _SERVER.append(ctx)
     return _SERVER[0]
@@ -327,6 +329,23 @@ def reconstruct_limited(angio_a: Angiogram, angio_b: Angiogram, seeds: Seeds,
     pixels = max(angio_a.image.size, angio_b.image.size)
     with job_limits(limits_for(pixels, memory_gb, cpu_s), hard_exit=True):
         return reconstruct_pair(angio_a, angio_b, seeds, options, progress=progress,
+                                vesselness=vesselness)
+
+
+
+def reconstruct_tree_limited(angio_a: Angiogram, angio_b: Angiogram, seeds: Seeds,
+                             options: ReconstructionOptions,
+                             vesselness: tuple[VesselnessMap, VesselnessMap] | None = None,
+                             memory_gb: float | None = None, cpu_s: float | None = None,
+                             progress: Progress | None = None) -> TreeReconstruction:
+    """``reconstruct_tree`` (every segment of ``seeds``) under the job's limits, as
+    :func:`reconstruct_limited`: the viewer's Reconstruct of several segments."""
+    from recon.io.limits import job_limits, limits_for
+    from recon.tree import reconstruct_tree
+
+    pixels = max(angio_a.image.size, angio_b.image.size)
+    with job_limits(limits_for(pixels, memory_gb, cpu_s), hard_exit=True):
+        return reconstruct_tree(angio_a, angio_b, seeds, options, progress=progress,
                                 vesselness=vesselness)
 
 

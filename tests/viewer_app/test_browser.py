@@ -564,3 +564,84 @@ def test_catheter_calibration_sets_the_pixel_spacing_from_two_clicks(
         finally:
             b.close()
             app.stop()
+
+
+@pytest.mark.skipif(not Path(CHROMIUM).is_file(), reason=f"no browser at {CHROMIUM}")
+def test_a_branch_added_from_a_landmark_and_the_tree_shown_branch_by_branch(
+    tmp_path: Path, artifacts_dir: Path
+) -> None:
+    """Issue 15's viewer item with the mouse: on IM7 / IM8 with the long arc and its
+    diagonal branch marked, the clinician selects the upper bifurcation landmark, presses
+    "New branch from landmark", clicks the new branch's waypoint and distal end in both
+    views and reconstructs the three-branch tree; choosing a branch shows its numbers."""
+    from recon.seeds import Seeds
+
+    sync_api = pytest.importorskip("playwright.sync_api", reason="playwright is not installed")
+    data = Path(__file__).resolve().parents[1] / "data"
+    full = load_seeds(data / "im7_im8_tree_seeds.json")
+    two = tmp_path / "two_branches.json"
+    two.write_text(json.dumps(Seeds(segments=full.segments[:2], features=full.features)
+                              .to_dict()))
+    app = ViewerApp(str(data / "IM7.dcm"), str(data / "IM8.dcm"), str(two), port=0,
+                    autosave_path=tmp_path / "autosave.json")
+    app.wait_ready()
+    upper = full.segments[2]
+    with sync_api.sync_playwright() as pw:
+        b = Browser(pw, tmp_path / "profile", artifacts_dir)
+        try:
+            b.open(app)
+            new_branch = b.page.get_by_role("button", name="New branch from landmark")
+            new_branch.click()  # nothing selected: the page says what to click first
+            b.page.get_by_text("New branch failed").first.wait_for(state="visible",
+                                                                  timeout=10_000)
+            b.shot("tree_0_no_landmark_selected.png")
+            mark = next(m for m in app.state.marks if m.kind == "feature" and m.view == "b"
+                        and app.state.feature_name(m.group) == "arc/upper")
+            b.choose("Selected mark", f"B {app.state.label(mark)} #{mark.id}")
+            _wait(lambda: app.state.selected_id == mark.id, 10, "the landmark to be selected")
+            new_branch.click()
+            _wait(lambda: len(app.state.segment_names) == 3, 10, "the new branch")
+            assert app.state.segment_links["Segment 3"] == ("long arc", "arc/upper")
+            _wait(lambda: b.dropdown_value("Segment") == "Segment 3", 10,
+                  "the page's Segment dropdown to show the branch")
+            for view, pts in (("a", upper.a_px), ("b", upper.b_px)):
+                new, notes = b.click(view, *pts[-1])  # guided: the distal end
+                assert new is not None and new.kind == "distal", notes
+            b.choose("Mode", MODE_LABELS["waypoint"])
+            _wait(lambda: app.state.mode == "waypoint", 10, "the mode")
+            for view, pts in (("a", upper.a_px), ("b", upper.b_px)):
+                new, notes = b.click(view, *pts[1])
+                assert new is not None and new.kind == "waypoint", notes
+            b.shot("tree_1_branch_marked.png")
+            n_notes = len(app.notifications)  # the refusal above was an error already
+            b.page.get_by_role("button", name="Reconstruct", exact=True).click()
+            _wait(lambda: any(n[0] == "error" or n[1] == "Reconstructed"  # drawn by then
+                              for n in app.notifications[n_notes:]), 180, "the tree")
+            rec = app.reconstruction
+            assert rec is not None and len(getattr(rec, "branches", ())) == 3, \
+                app.notifications[-3:]
+            assert rec.seeds.segments[2].parent == "long arc"
+            assert app.shown_branch == 2  # the current segment's branch
+            b.page.wait_for_timeout(1500)
+            b.shot("tree_2_reconstructed.png")
+            branch = b.page.get_by_label("Branch", exact=True)
+            branch.scroll_into_view_if_needed()
+            b.choose("Branch", "diagonal branch")
+            m = rec.branches[1].measurements
+            _wait(lambda: f"**{m.mld_mm:.2f} mm**" in app.panels.results.clinical.content, 10,
+                  "the diagonal branch's table")
+            assert app.shown_branch == 1
+            assert app.state.segment_names[app.state.current_segment] == "diagonal branch"
+            b.page.get_by_text(f"{m.mld_mm:.2f} mm").first.wait_for(state="visible",
+                                                                   timeout=10_000)
+            b.page.wait_for_timeout(800)
+            b.shot("tree_3_diagonal_shown.png")
+            b.page.get_by_text("Bifurcations").first.scroll_into_view_if_needed()
+            b.shot("tree_4_bifurcations.png")
+            b.choose("Show", "3D model")
+            _wait(lambda: app.layout == "3D model", 10, "the 3D model")
+            b.page.wait_for_timeout(1000)
+            b.shot("tree_5_model.png")
+        finally:
+            b.close()
+            app.stop()

@@ -69,7 +69,7 @@ def test_marks_summary() -> None:
     seeds = SimpleNamespace(segments=[object()], features=[object(), object()])
     state = SimpleNamespace(
         marks=[object()] * 5, to_seeds=lambda: seeds, last_message="too far",
-        missing=lambda: [f"missing {i}" for i in range(8)],
+        missing=lambda: [f"missing {i}" for i in range(8)], segment_names=["Segment 1"],
     )
     text = marks_markdown(state, 1.234, "/tmp/auto.json")
     lines = text.splitlines()

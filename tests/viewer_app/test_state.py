@@ -335,3 +335,64 @@ def test_one_damaged_mark_costs_only_that_mark(tmp_path: Path) -> None:
     assert len(restored.marks) == len(st.marks) - 2
     assert "2 damaged mark(s)" in store.notice
     assert store.kept_aside is not None and store.kept_aside.read_bytes() == original
+
+
+def test_a_branch_starts_at_the_selected_landmark_undoably_and_survives_the_autosave(
+        tmp_path: Path) -> None:
+    """Issue 15, the viewer's "New branch from landmark": the current segment is the parent,
+    the selected landmark (placed in both views) the bifurcation, the branch's proximal ends
+    sit on it; without such a landmark the clinician is told what to click."""
+    from viewer_app.results import marks_markdown
+
+    st = _state()
+    for view, col, row in (("a", 10, 20), ("a", 100, 120), ("b", 11, 21), ("b", 90, 95)):
+        st.click(view, col, row)  # guided: the main vessel's ends
+    st.select(None)
+    with pytest.raises(ValueError, match="select the bifurcation landmark"):
+        st.new_branch()
+    st.select(st.marks[0].id)  # a segment end is no landmark
+    with pytest.raises(ValueError, match="select the bifurcation landmark"):
+        st.new_branch()
+    landmark_a = st.click("a", 60, 70)  # guided: a landmark, its partner not yet in B
+    with pytest.raises(ValueError, match="only in A; click the bifurcation in B"):
+        st.new_branch()
+    assert st.segment_names == ["Segment 1"] and st.segment_links == {}
+    st.click("b", 50, 55)  # the partner: the landmark is complete and selected
+    n_marks = len(st.marks)
+
+    assert st.new_branch() == 1
+    assert st.segment_names == ["Segment 1", "Segment 2"] and st.current_segment == 1
+    assert st.segment_links == {"Segment 2": ("Segment 1", "feature 1")}
+    starts = {m.view: m.point_px for m in st.marks if m.group == 1 and m.kind == "proximal"}
+    assert starts == {"a": landmark_a.point_px, "b": (50.0, 55.0)}
+    assert st.next_clicks() == {"a": "distal end", "b": "distal end"}
+    summary = marks_markdown(st, float("nan"), tmp_path / "auto.json")
+    assert "**Segment 2** (current) ↳ branch of Segment 1 at landmark feature 1" in summary
+    st.click("a", 20, 160)
+    st.click("b", 30, 150)
+    seeds = st.to_seeds()
+    assert [(s.name, s.parent, s.bifurcation) for s in seeds.segments] == [
+        ("Segment 1", None, None), ("Segment 2", "Segment 1", "feature 1")]
+    assert seeds.segments[1].a_px == ((60.0, 70.0), (20.0, 160.0))
+    assert seeds_from_dict(seeds.to_dict()) == seeds  # a valid version-2 seeds file
+
+    store = Autosave(tmp_path / "auto.json", str(tmp_path / "a.dcm"), str(tmp_path / "b.dcm"))
+    store.save(st)
+    restored = _state()
+    assert store.load_into(restored, None)
+    assert restored.to_seeds() == seeds
+    assert restored.segment_links == st.segment_links
+    reloaded = _state()
+    reloaded.load_seeds(seeds_from_dict(seeds.to_dict()))
+    assert reloaded.segment_links == st.segment_links
+
+    # Undo: the two distal ends, then the branch in one step (its link and ends gone).
+    assert st.undo() and st.undo()
+    assert st.undo()
+    assert st.segment_names == ["Segment 1"] and st.segment_links == {}
+    assert len(st.marks) == n_marks and st.current_segment == 0
+    # A second segment's default name never repeats one the seeds brought.
+    named = _state()
+    named.load_seeds(seeds_from_dict({"segments": [
+        {"name": "Segment 2", "a": [[1, 2], [3, 4]], "b": [[5, 6], [7, 8]]}]}))
+    assert named.segment_names[named.new_segment()] == "Segment 3"

@@ -1,0 +1,266 @@
+"""A reconstruction as the viewer runs and shows it: one segment, or a vessel tree.
+
+Reconstruct runs ``reconstruct_pair`` on the current segment when the marks
+hold one complete segment, and ``reconstruct_tree`` on all of them when they
+hold several (both in a child process under the job's limits,
+:mod:`recon.io.isolated`). A tree is drawn branch by branch, each in its own
+colour of :data:`BRANCH_COLORS`: its back-projected 3D centerline (thick) over
+its 2D trace (thin) on both images, named at its distal end; in 3D the tree's
+one watertight mesh coloured by the nearest branch, each branch's centerline
+in a darker shade of its colour. The branch shown (the one whose table and
+chart the results panel holds) has the thicker lines, its MLD marked and its
+part of the mesh in full colour (the others' paler).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from typing import TYPE_CHECKING
+
+import numpy as np
+import viser
+from numpy.typing import NDArray
+
+from viewer_app.scene import (
+    MODEL_SIZE,
+    OVERLAY_Z,
+    ModelNodes,
+    View,
+    automatic_marks,
+    clear_results,
+    draw_flagged,
+    draw_lesion_marks,
+    draw_reconstruction,
+    draw_refusal,
+    model_placement,
+    overlay_name,
+    polyline_segments,
+)
+
+if TYPE_CHECKING:
+    from recon.pipeline import Reconstruction
+    from recon.seeds import Seeds
+    from recon.tree import TreeReconstruction
+    from viewer_app.panels import Panels
+    from viewer_app.state import MarkState
+
+    Result = Reconstruction | TreeReconstruction
+
+__all__ = [
+    "BRANCH_COLORS",
+    "branch_color",
+    "branch_heading",
+    "branch_names",
+    "branches_of",
+    "draw_tree",
+    "highlight_branch",
+    "is_tree",
+    "mesh_colors",
+    "run_reconstruction",
+    "seeds_for_run",
+    "show_branch",
+    "show_result",
+    "summary_text",
+]
+
+#: (name, RGB) of the branches' colours, in segment order (then again from the first):
+#: bright on a grey angiogram, and apart from the marks' green / yellow / red / cyan,
+#: the magenta epipolar line and the red flagged stretches.
+BRANCH_COLORS: tuple[tuple[str, tuple[int, int, int]], ...] = (
+    ("orange", (255, 150, 40)),
+    ("violet", (175, 115, 255)),
+    ("aquamarine", (60, 230, 190)),
+    ("pink", (255, 115, 190)),
+    ("lime", (185, 235, 60)),
+    ("sky blue", (110, 185, 255)),
+)
+FADE, FADE_TO = 0.6, (210, 210, 210)  # the mesh of the branches not shown: paler
+CENTERLINE_SHADE = 0.55  # a branch's 3D centerline: its colour darkened to this fraction
+THIN_PX, THICK_PX, SHOWN_PX = 1.2, 2.5, 4.5  # trace, back-projection, the shown branch's
+
+
+def branch_color(k: int) -> tuple[int, int, int]:
+    """RGB of branch (segment) ``k``."""
+    return BRANCH_COLORS[k % len(BRANCH_COLORS)][1]
+
+
+def is_tree(result: object) -> bool:
+    """Whether a result is a tree reconstruction (recon.tree.TreeReconstruction)."""
+    return hasattr(result, "branches")
+
+
+def branches_of(result: Result) -> tuple[Reconstruction, ...]:
+    """A tree's branches (segment order), or the one segment's reconstruction."""
+    return tuple(result.branches) if is_tree(result) else (result,)
+
+
+def branch_names(result: Result) -> list[str]:
+    """The segment names of a result's branches, in their order."""
+    return [result.seeds.segments[b.options.segment].name for b in branches_of(result)]
+
+
+def seeds_for_run(state: MarkState) -> tuple[Seeds, int]:
+    """The complete marks as seeds and the current segment's index among them (0 when it
+    is incomplete). Raises ValueError naming what is missing when none is complete."""
+    seeds = state.to_seeds()
+    if not seeds.segments:
+        raise ValueError(f"marks: no complete segment yet ({'; '.join(state.missing()[:3])})")
+    name = state.segment_names[state.current_segment]
+    names = [s.name for s in seeds.segments]
+    return seeds, names.index(name) if name in names else 0
+
+
+def run_reconstruction(view_a: View, view_b: View, seeds: Seeds, segment: int,
+                       intensity: Mapping[str, str],
+                       limits: tuple[float | None, float | None],
+                       progress: Callable[[str, float], None]) -> Result:
+    """Reconstruct the marks in a child process under ``limits`` (memory GB, CPU s): the
+    whole tree when ``seeds`` has several segments, else segment ``segment``. The viewer's
+    options: matcher match3, PALM calibration, each view's stored-values choice
+    (``intensity``: "a" / "b" -> lin, log or auto)."""
+    from recon.io.isolated import run_isolated
+    from recon.pipeline import ReconstructionOptions
+
+    options = ReconstructionOptions(matcher="match3", optimizer="palm", segment=segment,
+                                    intensity_a=intensity["a"], intensity_b=intensity["b"])
+    maps = (view_a.get_vesselness(), view_b.get_vesselness())  # cached for snapping
+    target = ("recon.io.isolated:reconstruct_tree_limited" if len(seeds.segments) > 1
+              else "recon.io.isolated:reconstruct_limited")
+    return run_isolated(target, (view_a.angio, view_b.angio, seeds, options, maps, *limits),
+                        progress=progress)
+
+
+def summary_text(result: Result) -> str:
+    """The one line of the "Reconstructed" notification."""
+    parts = branches_of(result)
+    mesh = result.tree_surface.mesh if is_tree(result) else result.surface.mesh
+    length_mm = sum(b.centerline_3d.length_mm for b in parts)
+    what = f"{len(parts)} branches, {length_mm:.1f} mm of centerline" if is_tree(result) \
+        else f"{length_mm:.1f} mm centerline"
+    return (f"{what}, {len(mesh.faces)} faces, "
+            f"{result.timings_ms.get('total', 0):.0f} ms")
+
+
+def branch_heading(result: Result, shown: int) -> str:
+    """The line above a tree's results: which branch the table and chart are of, its
+    colour on the images and the model, and how to show another."""
+    names = branch_names(result)
+    link = result.seeds.segments[branches_of(result)[shown].options.segment]
+    where = "" if link.parent is None else f", a branch of {link.parent} at {link.bifurcation}"
+    others = ", ".join(f"{n} ({BRANCH_COLORS[k % len(BRANCH_COLORS)][0]})"
+                       for k, n in enumerate(names) if k != shown)
+    return (f"**Branch shown: {names[shown]}** "
+            f"({BRANCH_COLORS[shown % len(BRANCH_COLORS)][0]}{where}). Choose another "
+            f"under **Branch** above (or Segment, in Marks): {others}.")
+
+
+def show_result(scene: viser.SceneApi, views: Mapping[str, View], panels: Panels,
+                result: Result, current: str) -> tuple[ModelNodes, int]:
+    """Draw a new result in place of the last (a tree branch by branch, else the one
+    segment as scene.draw_reconstruction does) and fill the results panel with the branch
+    of the segment called ``current`` (the first branch if it was not reconstructed).
+    Returns the model's nodes and the index of the branch shown."""
+    clear_results(scene, views)
+    names = branch_names(result)
+    shown = names.index(current) if current in names else 0
+    if is_tree(result):
+        model = draw_tree(scene, views, result, shown)
+    else:
+        model = draw_reconstruction(scene, views, result)
+    show_branch(scene, views, panels, result, model, shown, redraw=False)
+    return model, shown
+
+
+def show_branch(scene: viser.SceneApi, views: Mapping[str, View], panels: Panels,
+                result: Result, model: ModelNodes, index: int, redraw: bool = True) -> None:
+    """The results panel on branch ``index`` (its table, chart and lesion sliders; a
+    tree's branch line and bifurcations) and, with ``redraw``, that branch highlighted."""
+    if redraw:
+        highlight_branch(scene, views, result, model, index)
+    panels.show_reconstruction(branches_of(result)[index])
+    panels.show_tree(result, index)
+
+
+def _shade(rgb: tuple[int, int, int], fraction: float) -> tuple[int, int, int]:
+    """``rgb`` darkened to ``fraction`` of its brightness."""
+    return tuple(int(round(c * fraction)) for c in rgb)
+
+
+def draw_tree(scene: viser.SceneApi, views: Mapping[str, View], tree: TreeReconstruction,
+              shown: int) -> ModelNodes:
+    """Every branch on both images and the tree in 3D (module docstring); branch ``shown``
+    highlighted, its MLD and lesion ends marked. Returns the model's nodes."""
+    draw_refusal(scene, views, None)
+    for v in views.values():  # the one-segment trace and back-projection are not used
+        v.nodes.trace.points = np.zeros((0, 2, 3), np.float32)
+        v.nodes.backproj.points = np.zeros((0, 2, 3), np.float32)
+    draw_flagged(scene, views, tree)
+    parts = branches_of(tree)
+    T, model_position, centre = model_placement(np.asarray(tree.tree_surface.mesh.vertices),
+                                                parts[0].view_a.R_view_from_world, views)
+    root = scene.add_frame("/model", show_axes=False)
+    scene.add_label("/model/title", f"3D tree, {len(parts)} branches, coloured as on the "
+                    "images; drag to rotate\nthe chart is of the branch chosen under Branch",
+                    position=(model_position[0],
+                              model_position[1] - MODEL_SIZE / 2 - 0.04, 0.0),
+                    anchor="top-center")
+    model = ModelNodes(root=root, position=centre, T_scene_from_world=T)
+    highlight_branch(scene, views, tree, model, shown)
+    return model
+
+
+def mesh_colors(tree: TreeReconstruction, shown: int) -> NDArray[np.uint8]:
+    """RGB (V, 3) of the tree mesh's vertices: the colour of the branch whose 3D
+    centerline is nearest, faded towards grey (:data:`FADE`) but for branch ``shown``."""
+    from scipy.spatial import cKDTree
+
+    parts = branches_of(tree)
+    X_all = np.vstack([b.centerline_3d.X_world for b in parts])
+    owner = np.concatenate([np.full(len(b.centerline_3d.X_world), k)
+                            for k, b in enumerate(parts)])
+    _, nearest = cKDTree(X_all).query(np.asarray(tree.tree_surface.mesh.vertices))
+    palette = np.array([branch_color(k) for k in range(len(parts))], float)
+    faded = (1.0 - FADE) * palette + FADE * np.array(FADE_TO, float)
+    faded[shown] = palette[shown]
+    return faded[owner[nearest]].round().astype(np.uint8)
+
+
+def highlight_branch(scene: viser.SceneApi, views: Mapping[str, View],
+                     tree: TreeReconstruction, model: ModelNodes, shown: int) -> None:
+    """The tree's mesh (mesh_colors: branch ``shown`` in full colour), each branch's lines
+    on both images and in 3D with their names, branch ``shown``'s thicker and its MLD and
+    lesion ends marked (scene.draw_lesion_marks)."""
+    parts = branches_of(tree)
+    names = branch_names(tree)
+    T = model.T_scene_from_world
+    mesh = tree.tree_surface.mesh.copy()
+    mesh.apply_transform(T)
+    colors_rgb = mesh_colors(tree, shown)
+    mesh.visual.vertex_colors = np.column_stack([colors_rgb,
+                                                 np.full(len(colors_rgb), 255, np.uint8)])
+    scene.add_mesh_trimesh("/model/mesh", mesh, cast_shadow=False, receive_shadow=False)
+    for k, (part, name) in enumerate(zip(parts, names, strict=True)):
+        rgb, thickness_px = branch_color(k), SHOWN_PX if k == shown else THICK_PX
+        X_world = np.asarray(part.centerline_3d.X_world, dtype=float)
+        for key, cl, geom in (("a", part.centerline_a, part.view_a),
+                              ("b", part.centerline_b, part.view_b)):
+            v, root = views[key], f"{overlay_name(key)}/branches/b{k}"
+            scene.add_line_segments(f"{root}/trace", polyline_segments(v.local_from_px(
+                cl.points_px, z=OVERLAY_Z * 0.8)).astype(np.float32), rgb,
+                thickness=THIN_PX, thickness_units="screen")
+            back_local = v.local_from_px(geom.project(X_world), z=OVERLAY_Z * 1.2)
+            scene.add_line_segments(f"{root}/backproj", polyline_segments(back_local).astype(
+                np.float32), rgb, thickness=thickness_px, thickness_units="screen")
+            # above right of the distal end (its mark's label is below right)
+            scene.add_label(f"{root}/name", name,
+                            position=tuple(back_local[-1] + [0.008, -0.008, 0.0]),
+                            anchor="bottom-left", font_screen_scale=0.8)
+        X_scene = X_world @ T[:3, :3].T + T[:3, 3]
+        scene.add_line_segments(f"/model/branches/b{k}", polyline_segments(X_scene).astype(
+            np.float32), _shade(rgb, CENTERLINE_SHADE), thickness=thickness_px,
+            thickness_units="screen")
+        middle_scene = X_scene[len(X_scene) // 2]  # the ends hold the bifurcations, the MLD
+        scene.add_label(f"/model/branch_names/b{k}", name,
+                        position=tuple(middle_scene + [0.025, 0.0, 0.0]), anchor="center-left")
+    rec = parts[shown]
+    draw_lesion_marks(scene, views, rec, model, automatic_marks(rec), rec.measurements.mld_mm)
