@@ -30,6 +30,13 @@ EuroIntervention, for the phantom validation of such a tool):
   proximally) and the side branch.
 - Medina class: (proximal main, distal main, side branch), 1 where that
   segment's %DS >= 50, else 0.
+- The origin's plausibility: a straight branch leaving its parent's lumen
+  (radius r_J) at angle theta clears it after about r_J / sin(theta) of its
+  own arc. A reconstructed carina more than :data:`ORIGIN_CARINA_FACTOR`
+  times that far along the branch is not a branch's origin: in one view the
+  trace most likely runs along the parent first (a faint or narrowed ostium
+  skipped). ``origin_warning`` then says so; the angle and the side
+  branch's first millimetres are uncertain.
 
 :func:`sharpest_turn_deg` measures how sharply a centerline turns near its
 start (the largest angle between successive chords of
@@ -62,6 +69,8 @@ __all__ = [
     "MEDINA_DS_PCT",
     "TURN_CHORD_MM",
     "sharpest_turn_deg",
+    "ORIGIN_CARINA_FACTOR",
+    "origin_warning",
 ]
 
 QCA_SEGMENT_MM = 10.0  # length of each of the three bifurcation segments
@@ -70,6 +79,8 @@ MEDINA_DS_PCT = 50.0  # a Medina 1: diameter stenosis at least this
 _MIN_BLEND_MM = 1.0
 MAX_JOIN_TURN_DEG = 10.0  # the most the join's blend may turn a branch
 TURN_CHORD_MM = 1.0  # chord length of sharpest_turn_deg
+#: A carina farther along the branch than this times r_J / sin(angle) is implausible.
+ORIGIN_CARINA_FACTOR = 2.0
 
 
 def nearest_on_polyline(X_world: FloatArray, point: ArrayLike) -> tuple[FloatArray, float, int]:
@@ -233,7 +244,9 @@ class BifurcationQCA:
 
     ``proximal_main``, ``distal_main`` : on the parent (arc length of the parent);
     ``side_branch`` : on the branch (arc length of the branch);
-    ``medina`` : "p,d,s" each 1 (%DS >= 50) or 0.
+    ``medina`` : "p,d,s" each 1 (%DS >= 50) or 0;
+    ``origin_warning`` : why the branch's origin is implausible (module docstring),
+    or None.
     """
 
     name: str
@@ -249,6 +262,7 @@ class BifurcationQCA:
     bifurcation_angle_deg: float
     proximal_angle_deg: float
     medina: str
+    origin_warning: str | None = None
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -315,4 +329,18 @@ def bifurcation_qca(
         bifurcation_angle_deg=bif,
         proximal_angle_deg=prox,
         medina=medina,
+        origin_warning=origin_warning(name, parent, branch, s_c, r_j, bif),
     )
+
+
+def origin_warning(name: str, parent: str, branch: str, carina_mm: float, r_j_mm: float,
+                   angle_deg: float) -> str | None:
+    """One line when the carina lies farther along the branch (``carina_mm``) than
+    :data:`ORIGIN_CARINA_FACTOR` times r_J / sin(angle) (module docstring), else None."""
+    expected_mm = r_j_mm / max(float(np.sin(np.radians(angle_deg))), np.sin(np.radians(5.0)))
+    if carina_mm <= ORIGIN_CARINA_FACTOR * expected_mm:
+        return None
+    return (f"{name}: {branch} stays {carina_mm:.1f} mm inside {parent}'s lumen, where a "
+            f"branch at {angle_deg:.0f} deg leaves within about {expected_mm:.1f} mm: its trace "
+            f"in one view likely follows {parent} first (a faint ostium skipped), so its angle "
+            f"and ostium are uncertain; add a waypoint on {branch} just past its origin")

@@ -92,6 +92,9 @@ class TreeReconstruction:
         for rec in self.branches:
             for line in rec.warnings:
                 seen.setdefault(line if rec is self.first else f"{self._name(rec)}: {line}")
+        for bif in self.bifurcations:
+            if bif.origin_warning is not None:
+                seen.setdefault(bif.origin_warning)
         return tuple(seen)
 
     @property

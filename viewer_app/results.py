@@ -290,7 +290,8 @@ def bifurcations_markdown(tree: object) -> str:
     for label, key in parts:
         rows.append(row(f"% diameter stenosis, {label}",
                         [f"{getattr(b, key).diameter_stenosis_pct:.0f} %" for b in bifs]))
-    return "\n".join(rows)
+    doubts = [f"- ⚠ {b.origin_warning}" for b in bifs if getattr(b, "origin_warning", None)]
+    return "\n".join(rows + ([""] + doubts if doubts else []))
 
 
 def _with_ci(text: str, key: str, ci: dict, digits: int) -> str:

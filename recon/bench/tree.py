@@ -29,7 +29,9 @@ rendered images and header geometry, and is compared with the truth:
   branch's sharpest turn (:func:`recon.bifurcation.sharpest_turn_deg`) from
   the join to :data:`JOIN_TURN_BEYOND_MM` past the carina, against the true
   branch's over the same stretch (a join that kinks the branch shows as an
-  excess);
+  excess); whether the tool flagged the branch's origin as implausible
+  (``origin_warning``), counted in ``bifurcations_origin_flagged`` with the
+  angle error's SD over the others beside the SD over all;
 - the pose of view B (mean displacement over the tree's true points, as
   the regular suite: better than the header when smaller), and the same
   for the tree's calibration with every branch's matched points added
@@ -162,6 +164,7 @@ def _case(job: tuple) -> dict:
             "ds_true_pct": {k: getattr(tq, k).diameter_stenosis_pct
                             for k in BIFURCATION_SEGMENTS},
             "join_turn_deg": turn, "join_turn_true_deg": turn_true,
+            "origin_flagged": bq.origin_warning is not None,
         })
     X_tree = np.vstack([truth.segment_X_world] + [truth.vessels[v][0] for v in tc.vessels[1:]])
     _, before = pose_error(tc.case.view_b_nominal, tc.case.view_b_true, X_tree)
@@ -247,6 +250,7 @@ def summarise(rows: list[dict], failed: list[dict]) -> dict:
     ref = np.array([s["ref_diam_error_mm"] for s in lesion], dtype=float)
     bifs = [b for r in rows for b in r["bifurcations"]]
     ang = np.array([b["angle_error_deg"] for b in bifs], dtype=float)
+    flagged = np.array([b.get("origin_flagged", False) for b in bifs], dtype=bool)
     gaps = [b["gap_mm"] for b in bifs]
     ds_err = {k: np.array([b["ds_pct"][k] - b["ds_true_pct"][k] for b in bifs], dtype=float)
               for k in BIFURCATION_SEGMENTS}
@@ -273,6 +277,8 @@ def summarise(rows: list[dict], failed: list[dict]) -> dict:
         "ref_diam_err_sd_mm": sd(ref),
         "bifurcation_angle_err_mean_deg": mean(ang),
         "bifurcation_angle_err_sd_deg": sd(ang),
+        "bifurcations_origin_flagged": int(flagged.sum()),
+        "bifurcation_angle_err_sd_deg_unflagged": sd(ang[~flagged]),
         "max_gap_mm": float(max(gaps)) if gaps else None,
         "medina_agreement": float(np.mean([b["medina"] == b["medina_true"] for b in bifs]))
         if bifs else None,
@@ -324,6 +330,9 @@ def format_tree(result: dict) -> str:
         f"{f('ref_diam_err_sd_mm', '{:.3f}')} mm (lesions)",
         f"bifurcation angle error mean / SD   {f('bifurcation_angle_err_mean_deg', '{:+.2f}')} / "
         f"{f('bifurcation_angle_err_sd_deg', '{:.2f}')} deg",
+        f"  origin flagged implausible        {result['bifurcations_origin_flagged']} "
+        f"(angle error SD without them "
+        f"{f('bifurcation_angle_err_sd_deg_unflagged', '{:.2f}')} deg)",
         f"largest gap at a bifurcation (mm)   {f('max_gap_mm', '{:.3f}')}",
         f"Medina class as the truth's         {f('medina_agreement', '{:.2f}')} "
         f"({result['medina_disagreements']} differ, {result['medina_disagreements_borderline']}"

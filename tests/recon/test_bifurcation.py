@@ -12,6 +12,7 @@ from recon.bifurcation import (
     bifurcation_qca,
     carina_s_mm,
     nearest_on_polyline,
+    origin_warning,
     sharpest_turn_deg,
 )
 from recon.types import Centerline3D, arclength
@@ -84,6 +85,29 @@ def test_qca_finds_the_lesions_and_the_medina_class():
     assert q.bifurcation_angle_deg == pytest.approx(50.0, abs=0.05)
     assert q.gap_mm < 1e-9 and q.join_shift_mm == 0.2
     assert set(q.to_dict()["side_branch"]) >= {"mld_mm", "reference_diameter_mm"}
+
+
+def test_a_branch_that_stays_inside_its_parent_long_before_a_steep_turn_is_flagged():
+    """A 60 deg branch clears a 1.5 mm lumen after 1.5 / sin(60) = 1.7 mm of its arc: a
+    branch traced 6 mm along its parent first (then turning off at 60 deg) is flagged,
+    the straight one is not; a shallow branch (15 deg: 5.8 mm) may stay that long."""
+    parent, r, branch = _y(60.0, r_parent=1.5)
+    s_p, s_b = arclength(parent), arclength(branch)
+    profiles = ((s_p, np.full(len(s_p), 3.0), np.full(len(s_p), 3.0)),
+                (s_b, np.full(len(s_b), 2.0), np.full(len(s_b), 2.0)))
+    straight = bifurcation_qca("b1", "LAD", "D1", parent, profiles[0], branch, profiles[1], 0.0)
+    assert straight.origin_warning is None
+    along = _line([30, 0, 0], [1, 0, 0], 6.0)  # 6 mm inside the parent, then off at 60 deg
+    t = np.deg2rad(60.0)
+    detour = np.vstack([along, along[-1] + _line([0, 0, 0], [np.cos(t), np.sin(t), 0], 25.0)[1:]])
+    s_d = arclength(detour)
+    q = bifurcation_qca("b1", "LAD", "D1", parent, profiles[0], detour,
+                        (s_d, np.full(len(s_d), 2.0), np.full(len(s_d), 2.0)), 0.0)
+    assert q.carina_s_mm > 6.0
+    assert q.origin_warning is not None and q.origin_warning.startswith("b1: D1 stays")
+    assert "add a waypoint on D1 just past its origin" in q.origin_warning
+    assert q.to_dict()["origin_warning"] == q.origin_warning
+    assert origin_warning("b1", "LAD", "D1", 6.0, 1.5, 15.0) is None
 
 
 def test_sharpest_turn_is_the_corner_of_a_polyline_and_the_chord_angle_of_an_arc():
