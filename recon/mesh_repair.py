@@ -86,17 +86,25 @@ def _face_volumes(vertices: FloatArray, faces: NDArray[np.int64]) -> FloatArray:
     return np.einsum("ij,ij->i", v0, np.cross(v1, v2)) / 6.0
 
 
-def pieces(mesh: trimesh.Trimesh) -> tuple[int, int]:
-    """(separate pieces, inner cavities) of a marching-cubes mesh.
+def pieces(mesh: trimesh.Trimesh, speck_mm3: float = 0.0) -> tuple[int, int, int]:
+    """(separate pieces, inner cavities, specks) of a marching-cubes mesh.
 
     Marching cubes winds every closed surface the same way about the inside,
     so an outer piece has a signed volume of the largest piece's sign and a
-    cavity (an outside pocket within the inside) the opposite sign.
+    cavity (an outside pocket within the inside) the opposite sign. A closed
+    surface enclosing less than ``speck_mm3`` (either sign) is a speck: one voxel
+    of the sampled distance field on the wrong side of the level, not a piece of
+    vessel (:func:`recon.surface.build_tree_surface` passes one voxel's volume;
+    the thinnest vessel it draws, a semi-axis of one voxel, encloses more than
+    three voxels per voxel of length).
     """
     labels = trimesh.graph.connected_component_labels(mesh.face_adjacency, len(mesh.faces))
     if not labels.size:
-        return 0, 0
+        return 0, 0, 0
     signed = np.bincount(labels, weights=_face_volumes(mesh.vertices, mesh.faces))
     largest = int(np.argmax(np.bincount(labels)))
-    outer = np.sign(signed) == np.sign(signed[largest])
-    return int(np.count_nonzero(outer)), int(np.count_nonzero(~outer))
+    speck = (np.abs(signed) < speck_mm3) & (np.arange(len(signed)) != largest)
+    outer = (np.sign(signed) == np.sign(signed[largest])) & ~speck
+    cavity = ~outer & ~speck
+    return (int(np.count_nonzero(outer)), int(np.count_nonzero(cavity)),
+            int(np.count_nonzero(speck)))

@@ -409,6 +409,10 @@ class TreeSurface:
     cavities : closed surfaces marching cubes left inside the union (a
         voxel or two the sampled distance field put outside; dropped from
         the mesh, counted here).
+    specks : closed surfaces enclosing less than one voxel (a voxel of the
+        sampled distance field put inside beside the union, where its inner
+        core and the tube's exact distance disagree at a kink; dropped, counted
+        here, not counted as pieces).
     voxel_mm : grid edge used.
     grid_voxels : voxels of the (dense, float32) distance grid.
     """
@@ -418,6 +422,7 @@ class TreeSurface:
     voxel_mm: float
     grid_voxels: int
     cavities: int = 0
+    specks: int = 0
 
 
 def build_tree_surface(
@@ -473,7 +478,7 @@ def build_tree_surface(
     verts, faces, _, _ = marching_cubes(grid, level=0.0, spacing=(voxel, voxel, voxel))
     del grid
     mesh = trimesh.Trimesh(vertices=verts + lo, faces=faces, process=True)
-    components, cavities = pieces(mesh)
+    components, cavities, specks = pieces(mesh, speck_mm3=voxel**3)
     mesh = repair(mesh)
     return TreeSurface(mesh=mesh, components=components, voxel_mm=float(voxel),
-                       grid_voxels=int(np.prod(shape)), cavities=cavities)
+                       grid_voxels=int(np.prod(shape)), cavities=cavities, specks=specks)

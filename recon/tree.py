@@ -124,6 +124,7 @@ class TreeReconstruction:
                 "watertight": bool(mesh.is_watertight),
                 "components": self.tree_surface.components,
                 "cavities_removed": self.tree_surface.cavities,
+                "specks_removed": self.tree_surface.specks,
                 "volume_mm3": float(mesh.volume),
                 "voxel_mm": self.tree_surface.voxel_mm,
             },

@@ -246,8 +246,17 @@ def test_pieces_tells_a_second_vessel_from_a_cavity_inside_the_first():
     pocket.invert()  # wound like an outside pocket within the inside
     apart = trimesh.creation.icosphere(radius=1.0)
     apart.apply_translation([10.0, 0.0, 0.0])
-    assert _pieces(trimesh.util.concatenate([outer, pocket])) == (1, 1)
-    assert _pieces(trimesh.util.concatenate([outer, apart])) == (2, 0)
+    assert _pieces(trimesh.util.concatenate([outer, pocket])) == (1, 1, 0)
+    assert _pieces(trimesh.util.concatenate([outer, apart])) == (2, 0, 0)
+    # a closed surface under one voxel (0.2 mm) beside the union is a speck, either sign;
+    # the 1 mm sphere apart (4.2 mm3) stays a piece
+    speck = trimesh.creation.icosphere(radius=0.05)
+    speck.apply_translation([5.0, 0.0, 0.0])
+    hollow = speck.copy()
+    hollow.apply_translation([0.0, 5.0, 0.0])
+    hollow.invert()
+    assert _pieces(trimesh.util.concatenate([outer, apart, speck, hollow]),
+                   speck_mm3=0.2**3) == (2, 0, 2)
 
 
 @pytest.mark.parametrize("direction", [(1, 0, 0), (1, 1, 1), (2, 1, 0)])
