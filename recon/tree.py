@@ -213,9 +213,14 @@ def reconstruct_tree(
         timings["calibrate"] = _ms(t1)
         branches = []
         per_branch = replace(options, self_calibration=False)
-        traced = [traced[k] if seg.parent is None else _origin_from_the_clear_view(
-            traced[k], traced[seeds.segment_index(seg.parent)], view_a, calibration.view_b)
-            for k, seg in enumerate(seeds.segments)]
+        mismatches: dict[int, OriginMismatch] = {}
+        for k, seg in enumerate(seeds.segments):
+            if seg.parent is not None:
+                traced[k], mismatch = _origin_from_the_clear_view(
+                    traced[k], traced[seeds.segment_index(seg.parent)], view_a,
+                    calibration.view_b)
+                if mismatch is not None:
+                    mismatches[k] = mismatch
         for k, seg in enumerate(seeds.segments):
             _notify(progress, f"segment {seg.name}", 0.3 + 0.5 * k / len(seeds.segments))
             junction = None
@@ -245,7 +250,7 @@ def reconstruct_tree(
         tree_surface = build_tree_surface([rec.surface.sections for rec in branches],
                                           voxel_mm=options.voxel_mm)
     timings["tree_surface"] = _ms(t1)
-    bifurcations = tuple(_bifurcation(seeds, branches, k)
+    bifurcations = tuple(_bifurcation(seeds, branches, k, mismatches.get(k))
                          for k, seg in enumerate(seeds.segments) if seg.parent is not None)
     timings["total"] = _ms(t0)
     _notify(progress, "done", 1.0)
@@ -304,6 +309,10 @@ def _mark_tree_overlaps(traced: list[tuple[Centerline2D, Centerline2D]]
 #: Consecutive points that must be clear of the parent's lumen where a branch's trace
 #: leaves it (:func:`_first_clear`).
 CLEAR_RUN = 3
+#: Farthest (px) the epipolar line of the point where a branch's trace leaves its parent
+#: may pass from the other view's trace of the branch (the calibrated pose fits the
+#: clicks to about a pixel).
+ORIGIN_MATCH_PX = 2.0
 
 
 def _first_clear(cl: Centerline2D, parent: Centerline2D) -> int | None:
@@ -317,10 +326,31 @@ def _first_clear(cl: Centerline2D, parent: Centerline2D) -> int | None:
     return int(np.flatnonzero(run)[0]) if run.any() else None
 
 
+@dataclass(frozen=True)
+class OriginMismatch:
+    """A branch's trace in ``view`` ("A" or "B") that runs ``along_px`` along its parent
+    and leaves it at a point whose epipolar line misses the other view's trace of the
+    branch by ``miss_px``."""
+
+    view: str
+    along_px: float
+    miss_px: float
+
+    def warning(self, bifurcation: str, branch: str, parent: str) -> str:
+        """The one-line warning of the bifurcation (its ``origin_warning``)."""
+        other = "B" if self.view == "A" else "A"
+        return (f"{bifurcation}: in view {self.view} the trace of {branch} runs "
+                f"{self.along_px:.0f} px along {parent} and leaves it where view {other}'s "
+                f"trace of {branch} has no match ({self.miss_px:.1f} px off its epipolar "
+                f"line), so its angle and ostium are uncertain; add a waypoint on {branch} "
+                f"just past its origin in view {self.view}")
+
+
 def _origin_from_the_clear_view(pair: tuple[Centerline2D, Centerline2D],
                                 parent: tuple[Centerline2D, Centerline2D],
                                 view_a: ViewGeometry, view_b: ViewGeometry
-                                ) -> tuple[Centerline2D, Centerline2D]:
+                                ) -> tuple[tuple[Centerline2D, Centerline2D],
+                                           OriginMismatch | None]:
     """A branch's traces with the origin stretch of a view where the branch runs inside
     its parent's projected lumen redrawn from the other view.
 
@@ -334,12 +364,18 @@ def _origin_from_the_clear_view(pair: tuple[Centerline2D, Centerline2D],
     triangulated (S, S'), projected into view v and resampled to the stretch's
     point count. Their reliability is lowered, so the radius there is the other
     view's (recon.triangulation, step 5).
+
+    When S's epipolar line misses the other view's trace by more than
+    :data:`ORIGIN_MATCH_PX`, S is on no point of the branch that view sees: view v's
+    trace most likely followed the parent instead of a faint origin. Nothing is
+    redrawn and the mismatch is returned (else None) for the bifurcation's warning.
     """
     views = (view_a, view_b)
     out = list(pair)
+    mismatch = None
     seps = [_first_clear(pair[v], parent[v]) for v in (0, 1)]
     if seps[0] is None or seps[1] is None:
-        return pair
+        return pair, None
     for v in (0, 1):
         o = 1 - v
         cl, other = pair[v], pair[o]
@@ -354,7 +390,11 @@ def _origin_from_the_clear_view(pair: tuple[Centerline2D, Centerline2D],
         line = views[o].project(src_v + reach[:, None] * ray)
         dist = point_polyline_distance(other.points_px, line)
         j_sep = int(np.argmin(dist[: max(len(dist) // 2, 4)]))
-        if j_sep <= seps[o] or dist[j_sep] > 2.0:
+        if dist[j_sep] > ORIGIN_MATCH_PX:
+            mismatch = OriginMismatch("AB"[v], float(arclength(cl.points_px)[i_sep]),
+                                      float(dist[j_sep]))
+            continue
+        if j_sep <= seps[o]:
             continue  # the other view is inside the parent's lumen there too
         ends_v, ends_o = cl.points_px[[0, i_sep]], other.points_px[[0, j_sep]]
         X = triangulate(*((ends_v, ends_o) if v == 0 else (ends_o, ends_v)), view_a, view_b)
@@ -373,7 +413,7 @@ def _origin_from_the_clear_view(pair: tuple[Centerline2D, Centerline2D],
         reliability = cl.reliability.copy()
         reliability[: i_sep + 1] = np.minimum(reliability[: i_sep + 1], TREE_OVERLAP_RELIABILITY)
         out[v] = replace(cl, points_px=points, reliability=reliability)
-    return out[0], out[1]
+    return (out[0], out[1]), mismatch
 
 
 def _trace_both(angio_a: Angiogram, angio_b: Angiogram, seg: Segment,
@@ -424,17 +464,24 @@ def _profile_on(rec: Reconstruction) -> tuple[np.ndarray, np.ndarray, np.ndarray
     return s, d, ref
 
 
-def _bifurcation(seeds: Seeds, branches: list[Reconstruction], k: int) -> BifurcationQCA:
+def _bifurcation(seeds: Seeds, branches: list[Reconstruction], k: int,
+                 mismatch: OriginMismatch | None = None) -> BifurcationQCA:
+    """Segment k's bifurcation QCA; its origin warning from ``mismatch`` where the QCA's
+    own check has none."""
     seg = seeds.segments[k]
     parent = branches[seeds.segment_index(seg.parent)]
     branch = branches[k]
     shift = float(np.linalg.norm(branch.centerline_3d.X_world[0]
                                  - _unjoined_start(branch)))
-    return bifurcation_qca(
+    qca = bifurcation_qca(
         seg.bifurcation, seg.parent, seg.name,
         parent.centerline_3d.X_world, _profile_on(parent),
         branch.centerline_3d.X_world, _profile_on(branch), shift,
     )
+    if mismatch is not None and qca.origin_warning is None:
+        qca = replace(qca, origin_warning=mismatch.warning(seg.bifurcation, seg.name,
+                                                           seg.parent))
+    return qca
 
 
 def _unjoined_start(rec: Reconstruction) -> np.ndarray:

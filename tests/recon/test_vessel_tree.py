@@ -284,14 +284,30 @@ def test_a_branch_origin_traced_along_its_parent_is_redrawn_from_the_clear_view(
     rejoin = np.flatnonzero(s[:, 0] >= 9.0)[0]
     bad = np.vstack([along, branch_X[rejoin:]])
     branch = (trace(view_a, branch_X, 1.0), trace(view_b, bad, 1.0))
-    a_new, b_new = _origin_from_the_clear_view(branch, parent, view_a, view_b)
-    assert a_new is branch[0]
+    (a_new, b_new), mismatch = _origin_from_the_clear_view(branch, parent, view_a, view_b)
+    assert a_new is branch[0] and mismatch is None
     changed = np.flatnonzero(np.any(b_new.points_px != branch[1].points_px, axis=1))
     assert changed.size > 10
     before = np.max(point_polyline_distance(branch[1].points_px[changed], true_b))
     after = np.max(point_polyline_distance(b_new.points_px[changed], true_b))
     assert before > 3.0 and after < 1.0, (before, after)
     assert np.all(b_new.reliability[changed] <= TREE_OVERLAP_RELIABILITY)
+
+    # B's trace instead follows the parent for 8 mm and then another vessel (3 mm off
+    # the branch, below its plane) before it reaches the branch: where it leaves the
+    # parent, its epipolar line misses A's trace of the branch. Nothing is redrawn; the
+    # mismatch names view B.
+    off = np.array([0.0, 0.0, -3.0])
+    detour_X = np.vstack([centre + s[s[:, 0] <= 8.0] * u,
+                          centre + 8.0 * u + off + s[s[:, 0] <= 12.0] * w,
+                          branch_X[np.flatnonzero(s[:, 0] >= 20.0)[0]:]])
+    detour = (trace(view_a, branch_X, 1.0), trace(view_b, detour_X, 1.0))
+    (a_same, b_same), mismatch = _origin_from_the_clear_view(detour, parent, view_a, view_b)
+    assert a_same is detour[0] and b_same is detour[1]
+    assert mismatch is not None and mismatch.view == "B" and mismatch.miss_px > 2.0
+    line = mismatch.warning("bif 1", "D1", "LAD")
+    assert line.startswith("bif 1: in view B the trace of D1 runs ")
+    assert line.endswith("add a waypoint on D1 just past its origin in view B")
 
 
 def test_a_refused_branch_trace_names_its_segment_view_and_place():
