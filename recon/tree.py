@@ -88,9 +88,14 @@ class TreeReconstruction:
 
     @property
     def warnings(self) -> tuple[str, ...]:
+        """The first segment's warnings, the other branches' named by their segment (a
+        line the first segment already gave, such as an input file's, once), and the
+        bifurcations' origin warnings."""
         seen: dict[str, None] = {}
         for rec in self.branches:
             for line in rec.warnings:
+                if line in seen:  # the same input fact (a file's bit depth, its mapping)
+                    continue
                 seen.setdefault(line if rec is self.first else f"{self._name(rec)}: {line}")
         for bif in self.bifurcations:
             if bif.origin_warning is not None:

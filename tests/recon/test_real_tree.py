@@ -81,3 +81,15 @@ def test_the_branches_meet_their_parent_at_the_bifurcations(tree) -> None:
         assert bq.gap_mm <= 0.1
         assert 30.0 < bq.bifurcation_angle_deg < 150.0  # a real branch, not a continuation
     assert rec.tree_surface.components == 1 and rec.mesh.is_watertight
+
+
+def test_a_warning_about_the_input_files_is_said_once_for_the_tree(tree) -> None:
+    """Both files are 8-bit DRM: each view's warning appears once, not once per branch;
+    no branch origin is flagged here (the branches leave their parent as branches do)."""
+    _, _, rec = tree
+    lines = rec.warnings
+    assert len(lines) == len(set(lines))
+    for view in ("A", "B"):
+        about_file = [w for w in lines if f"view {view}: 8-bit, display-processed" in w]
+        assert len(about_file) == 1, lines
+    assert all(bq.origin_warning is None for bq in rec.bifurcations)
