@@ -49,6 +49,7 @@ from recon.surface import TreeSurface, build_tree_surface
 from recon.trace_error import TraceError
 from recon.triangulation import point_polyline_distance
 from recon.types import Angiogram, Centerline2D, arclength
+from recon.uncertainty import measurement_intervals
 
 __all__ = [
     "TreeReconstruction",
@@ -234,14 +235,14 @@ def reconstruct_tree(
                 junction = Junction(parent.centerline_3d.X_world,
                                     np.sqrt(parent.surface.sections.area_mm2 / np.pi))
             # a joined branch is measured from its carina on, which the whole branch's
-            # intervals do not describe: without the posterior none are sampled
+            # intervals would not describe: _from_carina samples them from there
             rec = reconstruct_pair(angio_a, angio_b, seeds, replace(per_branch, segment=k),
                                    None, vesselness, traced=traced[k],
                                    calibration=calibration if junction is None
                                    else replace(calibration, posterior=None),
                                    junction=junction, best_view=False)
             if junction is not None:
-                rec = _from_carina(replace(rec, calibration=calibration), junction)
+                rec = _from_carina(replace(rec, calibration=calibration), junction, calibration)
             branches.append(rec)
         branches = _best_views_among_branches(branches)
     _notify(progress, "building the tree's surface", 0.85)
@@ -443,17 +444,28 @@ def _ms(since: float) -> float:
     return round((time.perf_counter() - since) * 1000.0, 2)
 
 
-def _from_carina(rec: Reconstruction, junction: Junction) -> Reconstruction:
+def _from_carina(rec: Reconstruction, junction: Junction,
+                 calibration: CalibrationResult) -> Reconstruction:
     """A branch's profile and measurements from its carina on (the stretch before
-    lies inside the parent's lumen); arc lengths stay the branch's own. A joined
-    branch has no 95 % intervals (the whole branch's would not describe these)."""
+    lies inside the parent's lumen); arc lengths stay the branch's own. Its 95 %
+    intervals are sampled from the tree's pose posterior (``calibration``) and measured
+    the same way, from the carina on (none without a posterior)."""
     cl = rec.centerline_3d
     s_c = carina_s_mm(cl.X_world, junction.parent_X_world, junction.parent_radius_mm)
     keep = cl.s_mm >= s_c
     if np.count_nonzero(keep) < 12:  # too short beyond the carina: the whole branch
-        return rec
-    profile = lumen_profile(cl.s_mm[keep], rec.surface.sections.area_mm2[keep])
-    return replace(rec, profile=profile, measurements=measure_lumen(profile))
+        s_c = float(cl.s_mm[0])
+    profile = lumen_profile(cl.s_mm[cl.s_mm >= s_c], rec.surface.sections.area_mm2[
+        cl.s_mm >= s_c])
+    measurements = measure_lumen(profile)
+    intervals = None
+    if calibration.posterior is not None:
+        flagged = (None, None) if rec.consistency is None else (
+            rec.consistency.a.flagged, rec.consistency.b.flagged)
+        intervals = measurement_intervals(rec.view_a, rec.view_b_header, calibration.posterior,
+                                          cl, measurements, flagged_a=flagged[0],
+                                          flagged_b=flagged[1], measure_from_s_mm=s_c)
+    return replace(rec, profile=profile, measurements=measurements, intervals=intervals)
 
 
 def _profile_on(rec: Reconstruction) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

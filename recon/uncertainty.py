@@ -430,6 +430,7 @@ def measurement_intervals(
     seed: int = 0,
     flagged_a: NDArray[np.bool_] | None = None,
     flagged_b: NDArray[np.bool_] | None = None,
+    measure_from_s_mm: float | None = None,
 ) -> MeasurementIntervals:
     """95 % intervals by sampling the pose posterior and the 2D radius error.
 
@@ -462,6 +463,10 @@ def measurement_intervals(
     calipers too, and only the densitometric area, not used there, would tell).
     Each flagged stretch also loses the local radius model's
     averaging (the disagreement there is evidence, not noise).
+
+    ``measure_from_s_mm``: measure each draw, as ``measurements`` were measured, only
+    from this arc length of ``centerline`` on (a branch's QCA from its carina on,
+    :mod:`recon.tree`); the radius intervals still cover every point.
     """
     from recon.densitometry import fill_draws
     from recon.geometry import triangulate
@@ -528,8 +533,11 @@ def measurement_intervals(
     areas = section_areas([*draws, centerline], view_a, [*views_b, view_b0])
     values: dict[str, list[float]] = {}
     found = 0
+    keep = (np.ones(len(s0), dtype=bool) if measure_from_s_mm is None
+            else s0 >= measure_from_s_mm)
     for cl, area in zip(draws, areas, strict=False):
-        m = measure_lumen(lumen_profile(cl.s_mm, area))
+        s_kept = cl.s_mm[keep] - cl.s_mm[keep][0] + s0[keep][0]  # arc lengths as reported
+        m = measure_lumen(lumen_profile(s_kept, area[keep]))
         found += m.has_lesion
         for key, v in m.to_dict().items():
             if key != "has_lesion":

@@ -190,9 +190,11 @@ def test_the_tree_calibrates_by_the_rule_a_single_segment_uses(small_tree, mode)
     assert all(rec.view_b is tree.first.view_b for rec in tree.branches)
     assert all(rec.calibration is tree.calibration for rec in tree.branches)
     assert tree.first.intervals is not None  # the rule's pose posterior gives intervals
-    # a joined branch is measured from its carina: the whole branch's intervals would
-    # not describe it, so it has none
-    assert all(rec.intervals is None for rec in tree.branches[1:])
+    # a joined branch is measured from its carina, and so are its intervals' draws
+    for rec in tree.branches[1:]:
+        assert rec.intervals is not None
+        for key, (lo, hi) in rec.intervals.ci95.items():
+            assert lo <= rec.measurements.to_dict()[key] <= hi, key
 
 
 def test_an_unknown_calibration_rule_is_refused_before_tracing(small_tree, monkeypatch):
