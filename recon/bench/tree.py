@@ -16,7 +16,9 @@ rendered images and header geometry, and is compared with the truth:
 
 - per segment: MLD and reference diameter (the main's as the regular
   suite; a branch's true MLD is the least true diameter from its true
-  carina to its distal click, its reference the undiseased taper there).
+  carina to its distal click, its reference the undiseased taper there),
+  and whether the MLD's 95 % interval holds the true MLD
+  (``mld_ci95_coverage``, over the segments with an interval).
   ``mld_err_*`` and ``ref_diam_err_*`` are over the segments with a lesion
   (true MLD below :data:`LESION_FRACTION` of its reference: the main
   segment and the narrowed side-branch ostia); a healthy branch's "MLD" is
@@ -136,6 +138,7 @@ def _case(job: tuple) -> dict:
     for j, branch in enumerate(rec.branches):
         mld_true, ref_true = _branch_truth(tc, j)
         m = branch.measurements
+        ci = None if branch.intervals is None else branch.intervals.ci95.get("mld_mm")
         segments.append({
             "name": tc.seeds.segments[j].name,
             "mld_mm": m.mld_mm, "mld_true_mm": mld_true, "mld_error_mm": m.mld_mm - mld_true,
@@ -143,6 +146,8 @@ def _case(job: tuple) -> dict:
             "reference_true_mm": ref_true,
             "ref_diam_error_mm": m.reference_diameter_mm - ref_true,
             "diameter_stenosis_pct": m.diameter_stenosis_pct,
+            "mld_ci95_mm": None if ci is None else list(ci),
+            "mld_ci95_covers": None if ci is None else bool(ci[0] <= mld_true <= ci[1]),
         })
     bifurcations = []
     main_X, main_r = truth.vessels[0]
@@ -248,6 +253,9 @@ def summarise(rows: list[dict], failed: list[dict]) -> dict:
     mld_all = np.array([s["mld_error_mm"] for s in segs], dtype=float)
     mld = np.array([s["mld_error_mm"] for s in lesion], dtype=float)
     ref = np.array([s["ref_diam_error_mm"] for s in lesion], dtype=float)
+    covered = [s["mld_ci95_covers"] for s in segs if s.get("mld_ci95_covers") is not None]
+    covered_lesion = [s["mld_ci95_covers"] for s in lesion
+                      if s.get("mld_ci95_covers") is not None]
     bifs = [b for r in rows for b in r["bifurcations"]]
     ang = np.array([b["angle_error_deg"] for b in bifs], dtype=float)
     flagged = np.array([b.get("origin_flagged", False) for b in bifs], dtype=bool)
@@ -275,6 +283,9 @@ def summarise(rows: list[dict], failed: list[dict]) -> dict:
         "mld_err_all_sd_mm": sd(mld_all),
         "ref_diam_err_mean_mm": mean(ref),
         "ref_diam_err_sd_mm": sd(ref),
+        "mld_ci95_coverage": float(np.mean(covered)) if covered else None,
+        "mld_ci95_coverage_lesions": float(np.mean(covered_lesion)) if covered_lesion
+        else None,
         "bifurcation_angle_err_mean_deg": mean(ang),
         "bifurcation_angle_err_sd_deg": sd(ang),
         "bifurcations_origin_flagged": int(flagged.sum()),
@@ -326,6 +337,8 @@ def format_tree(result: dict) -> str:
         f"{f('mld_err_sd_mm', '{:.3f}')}",
         f"  every segment                     {f('mld_err_all_mean_mm')} / "
         f"{f('mld_err_all_sd_mm', '{:.3f}')}",
+        f"MLD 95 % interval holds the truth   {f('mld_ci95_coverage', '{:.2f}')} of "
+        f"segments ({f('mld_ci95_coverage_lesions', '{:.2f}')} of those with a lesion)",
         f"reference diameter error mean / SD  {f('ref_diam_err_mean_mm')} / "
         f"{f('ref_diam_err_sd_mm', '{:.3f}')} mm (lesions)",
         f"bifurcation angle error mean / SD   {f('bifurcation_angle_err_mean_deg', '{:+.2f}')} / "
