@@ -11,6 +11,7 @@ from viewer_app.results import (
     NO_RECONSTRUCTION_TEXT,
     NOT_CALIBRATED_TEXT,
     angle_text,
+    bifurcations_markdown,
     calibration_markdown,
     fmt,
     info_markdown,
@@ -184,3 +185,23 @@ def test_results_show_the_95_pct_interval_beside_the_value() -> None:
     lines = results_markdown(rec).splitlines()
     assert "| mld_mm | 1.48 (1.39-1.57) |" in lines
     assert "| has_lesion | True |" in lines
+
+
+def test_the_bifurcation_table_says_when_a_branch_origin_is_doubtful() -> None:
+    from dataclasses import replace
+
+    from recon.bifurcation import bifurcation_qca
+
+    s = np.arange(0.0, 60.0, 0.1)
+    parent = np.column_stack([s, 0 * s, 0 * s])
+    t = np.deg2rad(60.0)
+    branch = np.column_stack([30.0 + s[:300] * np.cos(t), s[:300] * np.sin(t), 0 * s[:300]])
+    d = (s, np.full(len(s), 3.0), np.full(len(s), 3.0))
+    b = (s[:300], np.full(300, 2.0), np.full(300, 2.0))
+    fine = bifurcation_qca("LAD/D1", "LAD", "D1", parent, d, branch, b, 0.0)
+    assert fine.origin_warning is None
+    doubt = replace(fine, origin_warning="LAD/D1: in view B the trace of D1 runs 80 px along LAD")
+    assert "⚠" not in bifurcations_markdown(SimpleNamespace(bifurcations=(fine,)))
+    table = bifurcations_markdown(SimpleNamespace(bifurcations=(fine, doubt)))
+    assert "- ⚠ LAD/D1: in view B the trace of D1 runs 80 px along LAD" in table
+    assert table.count("⚠") == 1
