@@ -219,7 +219,7 @@ def reconstruct_tree(
         timings["calibrate"] = _ms(t1)
         branches = []
         per_branch = replace(options, self_calibration=False)
-        mismatches: dict[int, OriginMismatch] = {}
+        mismatches: dict[int, OriginMismatch | OriginUnseen] = {}
         for k, seg in enumerate(seeds.segments):
             if seg.parent is not None:
                 traced[k], mismatch = _origin_from_the_clear_view(
@@ -352,11 +352,22 @@ class OriginMismatch:
                 f"just past its origin in view {self.view}")
 
 
+@dataclass(frozen=True)
+class OriginUnseen:
+    """A branch whose trace clears its parent's projected lumen in neither view."""
+
+    def warning(self, bifurcation: str, branch: str, parent: str) -> str:
+        """The one-line warning of the bifurcation (its ``origin_warning``)."""
+        return (f"{bifurcation}: {branch} does not part from {parent}'s shadow in either "
+                f"view, so where it leaves {parent}, its angle and its ostium are uncertain; "
+                f"a view in which the two vessels part would settle them")
+
+
 def _origin_from_the_clear_view(pair: tuple[Centerline2D, Centerline2D],
                                 parent: tuple[Centerline2D, Centerline2D],
                                 view_a: ViewGeometry, view_b: ViewGeometry
                                 ) -> tuple[tuple[Centerline2D, Centerline2D],
-                                           OriginMismatch | None]:
+                                           OriginMismatch | OriginUnseen | None]:
     """A branch's traces with the origin stretch of a view where the branch runs inside
     its parent's projected lumen redrawn from the other view.
 
@@ -374,12 +385,16 @@ def _origin_from_the_clear_view(pair: tuple[Centerline2D, Centerline2D],
     When S's epipolar line misses the other view's trace by more than
     :data:`ORIGIN_MATCH_PX`, S is on no point of the branch that view sees: view v's
     trace most likely followed the parent instead of a faint origin. Nothing is
-    redrawn and the mismatch is returned (else None) for the bifurcation's warning.
+    redrawn and the mismatch is returned for the bifurcation's warning; so is
+    :class:`OriginUnseen` when neither view's trace clears the parent's lumen (else
+    None).
     """
     views = (view_a, view_b)
     out = list(pair)
     mismatch = None
     seps = [_first_clear(pair[v], parent[v]) for v in (0, 1)]
+    if seps[0] is None and seps[1] is None:
+        return pair, OriginUnseen()
     if seps[0] is None or seps[1] is None:
         return pair, None
     for v in (0, 1):
@@ -482,7 +497,7 @@ def _profile_on(rec: Reconstruction) -> tuple[np.ndarray, np.ndarray, np.ndarray
 
 
 def _bifurcation(seeds: Seeds, branches: list[Reconstruction], k: int,
-                 mismatch: OriginMismatch | None = None) -> BifurcationQCA:
+                 mismatch: OriginMismatch | OriginUnseen | None = None) -> BifurcationQCA:
     """Segment k's bifurcation QCA; its origin warning from ``mismatch`` where the QCA's
     own check has none."""
     seg = seeds.segments[k]

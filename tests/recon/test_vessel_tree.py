@@ -311,6 +311,16 @@ def test_a_branch_origin_traced_along_its_parent_is_redrawn_from_the_clear_view(
     assert line.startswith("bif 1: in view B the trace of D1 runs ")
     assert line.endswith("add a waypoint on D1 just past its origin in view B")
 
+    # both views' traces stay on the parent's centre line: the origin is seen in neither
+    from recon.tree import OriginUnseen
+
+    inside = centre + s[s[:, 0] <= 8.0] * u
+    merged = (trace(view_a, inside, 1.0), trace(view_b, inside, 1.0))
+    kept, unseen = _origin_from_the_clear_view(merged, parent, view_a, view_b)
+    assert kept is merged and isinstance(unseen, OriginUnseen)
+    assert unseen.warning("bif 1", "D1", "LAD").startswith(
+        "bif 1: D1 does not part from LAD's shadow in either view")
+
 
 def test_a_refused_branch_trace_names_its_segment_view_and_place():
     """In a tree a refused trace names its segment and stays a TraceError with its view
