@@ -242,7 +242,7 @@ def reconstruct_tree(
                                    else replace(calibration, posterior=None),
                                    junction=junction, best_view=False)
             if junction is not None:
-                rec = _from_carina(replace(rec, calibration=calibration), junction, calibration)
+                rec = _from_carina(replace(rec, calibration=calibration), junction)
             branches.append(rec)
         branches = _best_views_among_branches(branches)
     _notify(progress, "building the tree's surface", 0.85)
@@ -459,21 +459,20 @@ def _ms(since: float) -> float:
     return round((time.perf_counter() - since) * 1000.0, 2)
 
 
-def _from_carina(rec: Reconstruction, junction: Junction,
-                 calibration: CalibrationResult) -> Reconstruction:
+def _from_carina(rec: Reconstruction, junction: Junction) -> Reconstruction:
     """A branch's profile and measurements from its carina on (the stretch before
     lies inside the parent's lumen); arc lengths stay the branch's own. Its 95 %
-    intervals are sampled from the tree's pose posterior (``calibration``) and measured
-    the same way, from the carina on (none without a posterior)."""
+    intervals are sampled from the pose posterior of ``rec.calibration`` (the tree's)
+    and measured the same way, from the carina on (none without a posterior)."""
     cl = rec.centerline_3d
     s_c = carina_s_mm(cl.X_world, junction.parent_X_world, junction.parent_radius_mm)
     keep = cl.s_mm >= s_c
     if np.count_nonzero(keep) < 12:  # too short beyond the carina: the whole branch
-        s_c = float(cl.s_mm[0])
-    profile = lumen_profile(cl.s_mm[cl.s_mm >= s_c], rec.surface.sections.area_mm2[
-        cl.s_mm >= s_c])
+        s_c, keep = float(cl.s_mm[0]), np.ones(len(cl.s_mm), dtype=bool)
+    profile = lumen_profile(cl.s_mm[keep], rec.surface.sections.area_mm2[keep])
     measurements = measure_lumen(profile)
     intervals = None
+    calibration = rec.calibration
     if calibration.posterior is not None:
         flagged = (None, None) if rec.consistency is None else (
             rec.consistency.a.flagged, rec.consistency.b.flagged)

@@ -465,9 +465,9 @@ class ViewerApp:
                 self.state.set_current_segment(names.index(name))
                 self._redraw_marks()
             rec = self.reconstruction
-            if self.model is not None and tree_view.is_tree(rec) \
-                    and name in tree_view.branch_names(rec):
-                self.shown_branch, self.lesion = tree_view.branch_names(rec).index(name), None
+            shown = tree_view.branch_names(rec) if tree_view.is_tree(rec) else []
+            if self.model is not None and name in shown:
+                self.shown_branch, self.lesion = shown.index(name), None
                 tree_view.show_branch(self.server.scene, self.views, self.panels, rec,
                                       self.model, self.shown_branch)
 

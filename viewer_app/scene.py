@@ -464,23 +464,20 @@ def draw_flagged(scene: viser.SceneApi, views: Mapping[str, View], rec: Reconstr
     images (the 3D stretch projected), with a short label on the view it names; every
     branch's of a tree (recon.tree.TreeReconstruction). Returns the number of stretches
     drawn."""
-    parts = tuple(getattr(rec, "branches", (rec,)))
-    count = 0
+    # every part's flagged 3D stretches (points (K, 3)), with the part they lie on
+    flagged = []
+    for part in tuple(getattr(rec, "branches", (rec,))):
+        X = np.asarray(part.centerline_3d.X_world, dtype=float)
+        s = np.asarray(part.centerline_3d.s_mm, dtype=float)
+        for st in tuple(getattr(getattr(part, "consistency", None), "stretches", ())):
+            keep = (s >= st.start_mm - 1e-6) & (s <= st.end_mm + 1e-6)
+            flagged.append((part, st, X[keep]))
     for key in ("a", "b"):
         v = views[key]
-        segments, named = [], []
-        for part in parts:
-            geom = part.view_a if key == "a" else part.view_b
-            stretches = tuple(getattr(getattr(part, "consistency", None), "stretches", ()))
-            X = np.asarray(part.centerline_3d.X_world, dtype=float)
-            s = np.asarray(part.centerline_3d.s_mm, dtype=float)
-            for st in stretches:
-                keep = (s >= st.start_mm - 1e-6) & (s <= st.end_mm + 1e-6)
-                if keep.sum() >= 2:
-                    segments.append(polyline_segments(
-                        v.local_from_px(geom.project(X[keep]), z=OVERLAY_Z * 1.4)))
-            named += [st for st in stretches if st.view == key]
-            count += len(stretches) if key == "a" else 0
+        segments = [polyline_segments(v.local_from_px(
+            (part.view_a if key == "a" else part.view_b).project(X_st), z=OVERLAY_Z * 1.4))
+            for part, _, X_st in flagged if len(X_st) >= 2]
+        named = [st for _, st, _ in flagged if st.view == key]
         seg = np.concatenate(segments) if segments else np.zeros((0, 2, 3))
         scene.add_line_segments(f"{overlay_name(key)}/flagged", seg.astype(np.float32),
                                 FLAGGED_COLOR, thickness=5.0, thickness_units="screen")
@@ -490,7 +487,7 @@ def draw_flagged(scene: viser.SceneApi, views: Mapping[str, View], rec: Reconstr
                             f"⚠ {st.kind.replace('_', ' ')} {st.start_mm:.0f}-{st.end_mm:.0f} mm",
                             position=tuple(p + np.array([0.01, -0.01, 0.0])),
                             anchor="bottom-left", font_screen_scale=0.8)
-    return count
+    return len(flagged)
 
 
 #: The ring round the place a refused trace names: this fraction of the image's longer

@@ -15,6 +15,7 @@ part of the mesh in full colour (the others' paler).
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
+from functools import lru_cache
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -209,9 +210,10 @@ def draw_tree(scene: viser.SceneApi, views: Mapping[str, View], tree: TreeRecons
     return model
 
 
-def mesh_colors(tree: TreeReconstruction, shown: int) -> NDArray[np.uint8]:
-    """RGB (V, 3) of the tree mesh's vertices: the colour of the branch whose 3D
-    centerline is nearest, faded towards grey (:data:`FADE`) but for branch ``shown``."""
+@lru_cache(maxsize=1)
+def _vertex_branch(tree: TreeReconstruction) -> NDArray[np.int64]:
+    """The branch (V,) whose 3D centerline is nearest each vertex of the tree's mesh (the
+    last tree's, kept: each switch of the branch shown recolours the same mesh)."""
     from scipy.spatial import cKDTree
 
     parts = branches_of(tree)
@@ -219,10 +221,16 @@ def mesh_colors(tree: TreeReconstruction, shown: int) -> NDArray[np.uint8]:
     owner = np.concatenate([np.full(len(b.centerline_3d.X_world), k)
                             for k, b in enumerate(parts)])
     _, nearest = cKDTree(X_all).query(np.asarray(tree.tree_surface.mesh.vertices))
-    palette = np.array([branch_color(k) for k in range(len(parts))], float)
+    return owner[nearest]
+
+
+def mesh_colors(tree: TreeReconstruction, shown: int) -> NDArray[np.uint8]:
+    """RGB (V, 3) of the tree mesh's vertices: the colour of the branch whose 3D
+    centerline is nearest, faded towards grey (:data:`FADE`) but for branch ``shown``."""
+    palette = np.array([branch_color(k) for k in range(len(branches_of(tree)))], float)
     faded = (1.0 - FADE) * palette + FADE * np.array(FADE_TO, float)
     faded[shown] = palette[shown]
-    return faded[owner[nearest]].round().astype(np.uint8)
+    return faded[_vertex_branch(tree)].round().astype(np.uint8)
 
 
 def highlight_branch(scene: viser.SceneApi, views: Mapping[str, View],

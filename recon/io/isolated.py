@@ -316,6 +316,16 @@ def _fresh_child() -> int:
     return _run_target(target, args, wants_progress, lambda f: _write_frame(frames, f))
 
 
+def _viewer_job_limits(angio_a: Angiogram, angio_b: Angiogram, memory_gb: float | None,
+                       cpu_s: float | None):
+    """A viewer job's limits in its child process: for views of this size (or the ones
+    given); a breach ends the process (``hard_exit``)."""
+    from recon.io.limits import job_limits, limits_for
+
+    pixels = max(angio_a.image.size, angio_b.image.size)
+    return job_limits(limits_for(pixels, memory_gb, cpu_s), hard_exit=True)
+
+
 def reconstruct_limited(angio_a: Angiogram, angio_b: Angiogram, seeds: Seeds,
                         options: ReconstructionOptions,
                         vesselness: tuple[VesselnessMap, VesselnessMap] | None = None,
@@ -323,14 +333,11 @@ def reconstruct_limited(angio_a: Angiogram, angio_b: Angiogram, seeds: Seeds,
                         progress: Progress | None = None) -> Reconstruction:
     """``reconstruct_pair`` under the job's limits (for views of this size, or the ones
     given): the viewer's Reconstruct, through :func:`run_isolated`."""
-    from recon.io.limits import job_limits, limits_for
     from recon.pipeline import reconstruct_pair
 
-    pixels = max(angio_a.image.size, angio_b.image.size)
-    with job_limits(limits_for(pixels, memory_gb, cpu_s), hard_exit=True):
+    with _viewer_job_limits(angio_a, angio_b, memory_gb, cpu_s):
         return reconstruct_pair(angio_a, angio_b, seeds, options, progress=progress,
                                 vesselness=vesselness)
-
 
 
 def reconstruct_tree_limited(angio_a: Angiogram, angio_b: Angiogram, seeds: Seeds,
@@ -340,11 +347,9 @@ def reconstruct_tree_limited(angio_a: Angiogram, angio_b: Angiogram, seeds: Seed
                              progress: Progress | None = None) -> TreeReconstruction:
     """``reconstruct_tree`` (every segment of ``seeds``) under the job's limits, as
     :func:`reconstruct_limited`: the viewer's Reconstruct of several segments."""
-    from recon.io.limits import job_limits, limits_for
     from recon.tree import reconstruct_tree
 
-    pixels = max(angio_a.image.size, angio_b.image.size)
-    with job_limits(limits_for(pixels, memory_gb, cpu_s), hard_exit=True):
+    with _viewer_job_limits(angio_a, angio_b, memory_gb, cpu_s):
         return reconstruct_tree(angio_a, angio_b, seeds, options, progress=progress,
                                 vesselness=vesselness)
 
