@@ -67,10 +67,11 @@ from recon.centerline import (
     trace_segment,
 )
 from recon.geometry import ViewGeometry
-from recon.synth import make_phantom
+from recon.synth import PhantomTruth, make_phantom
 from recon.types import arclength
 
-__all__ = ["run", "format_table", "PRESET_CYCLE", "END_EXCLUSION_PX", "CASES", "SUCCESS_PX"]
+__all__ = ["run", "format_table", "PRESET_CYCLE", "END_EXCLUSION_PX", "CASES", "SUCCESS_PX",
+           "truth_gap_px"]
 
 CASES = 10  # phantom cases when run(cases=None)
 #: Arc length (px) left out of the radius error at both ends of each trace.
@@ -236,19 +237,14 @@ def _evaluate_varied_view(image: np.ndarray, view: ViewGeometry, clicks_px: np.n
     inner = (s >= END_EXCLUSION_PX) & (s <= s[-1] - END_EXCLUSION_PX)
     r_true = radius_true[nearest[inner]]
     err_r = cl.radius_px[inner] - r_true
-    # Coverage of the true segment: its distance to the trace (densified to 0.1 px).
-    seg, _ = _dense_truth(view, case.truth.segment_X_world, case.truth.segment_radius_mm, 0.1)
-    seg_s = arclength(seg)
-    seg_in = (seg_s >= END_EXCLUSION_PX) & (seg_s <= seg_s[-1] - END_EXCLUSION_PX)
-    trace_dense, _ = _dense_polyline(cl.points_px, 0.1)
-    gap, _ = cKDTree(trace_dense).query(seg[seg_in])
+    gap, truth_length_px = truth_gap_px(cl.points_px, view, case.truth)
     far = gap > SUCCESS_PX
     return {
         "status": "lost" if np.any(far) else "ok",
         "success": bool(not np.any(far)),
         "n_points": int(len(cl.points_px)),
         "length_px": float(cl.length_px),
-        "truth_length_px": float(seg_s[-1]),
+        "truth_length_px": truth_length_px,
         "truth_max_gap_px": float(gap.max()) if len(gap) else 0.0,
         "lost_px": float(np.sum(far) * 0.1),
         "centerline_rms_px": float(np.sqrt(np.mean(dist**2))),
@@ -260,6 +256,21 @@ def _evaluate_varied_view(image: np.ndarray, view: ViewGeometry, clicks_px: np.n
         "intensity_mapping": getattr(cl, "intensity_mapping", None),
         "trace_ms": 1e3 * (t2 - t1),
     }
+
+
+def truth_gap_px(points_px: np.ndarray, view: ViewGeometry,
+                 truth: PhantomTruth) -> tuple[np.ndarray, float]:
+    """How far (px) each point of the projected true segment (every 0.1 px, the first and
+    last :data:`END_EXCLUSION_PX` left out) lies from a trace ``points_px`` (N, 2), and
+    the projected segment's length (px); ``view`` is the view's TRUE geometry and
+    ``truth`` the case's truth. A trace succeeds where no
+    gap exceeds :data:`SUCCESS_PX`."""
+    seg, _ = _dense_truth(view, truth.segment_X_world, truth.segment_radius_mm, 0.1)
+    seg_s = arclength(seg)
+    seg_in = (seg_s >= END_EXCLUSION_PX) & (seg_s <= seg_s[-1] - END_EXCLUSION_PX)
+    trace_dense, _ = _dense_polyline(np.asarray(points_px, dtype=float), 0.1)
+    gap, _ = cKDTree(trace_dense).query(seg[seg_in])
+    return gap, float(seg_s[-1])
 
 
 def _dense_polyline(points: np.ndarray, step: float) -> tuple[np.ndarray, np.ndarray]:

@@ -139,9 +139,32 @@ def evaluate_case(case: PhantomCase, options: ReconstructionOptions, *,
         row["consistency_ok"] = None if consistency is None else bool(consistency.ok)
         row["flagged_stretches"] = 0 if consistency is None else len(consistency.stretches)
         row["warnings"] = list(getattr(rec, "warnings", ()))
+        row.update(_trace_figures(case, rec))
         row["mappings"] = [getattr(rec.centerline_a, "intensity_mapping", None),
                            getattr(rec.centerline_b, "intensity_mapping", None)]
     return row
+
+
+def _trace_figures(case: PhantomCase, rec: Reconstruction) -> dict:
+    """Whether each view's final trace (the one the 3D result rests on) lies on the
+    projected true segment (``bench centerline``'s criterion: no stretch more than
+    :data:`~recon.bench.centerline.SUCCESS_PX` off), and whether a lost trace was told:
+    the cross-view check listed a stretch of that view (``trace_lost_unflagged_a|b`` is
+    a trace lost without any sign to the user)."""
+    from recon.bench.centerline import SUCCESS_PX, truth_gap_px
+
+    out: dict = {}
+    consistency = rec.consistency
+    for name, cl, view in (("a", rec.centerline_a, case.view_a),
+                           ("b", rec.centerline_b, case.view_b_true)):
+        gap, _ = truth_gap_px(cl.points_px, view, case.truth)
+        lost = bool(np.any(gap > SUCCESS_PX))
+        flagged = consistency is not None and any(st.view == name
+                                                  for st in consistency.stretches)
+        out[f"trace_gap_px_{name}"] = float(gap.max()) if len(gap) else 0.0
+        out[f"trace_lost_{name}"] = lost
+        out[f"trace_lost_unflagged_{name}"] = lost and not flagged
+    return out
 
 
 def closed_truth_volume_mm3(truth: PhantomTruth) -> float:
@@ -494,6 +517,11 @@ def _figures(rows: list[dict], failures: list[dict]) -> dict:
         if rows else float("nan"),
         "median_pipeline_ms": median(col("wall_ms")),
         "flagged_cases": sum(r.get("flagged_stretches", 0) > 0 for r in rows),
+        # the reconstructed cases' final traces (both views): on the truth, and the lost
+        # ones the cross-view check did not flag (wrong without a sign)
+        "trace_success": float(np.mean([not r[f"trace_lost_{v}"] for r in rows for v in "ab"]))
+        if rows else float("nan"),
+        "traces_lost_unflagged": sum(r[f"trace_lost_unflagged_{v}"] for r in rows for v in "ab"),
         "failures": [{k: f[k] for k in ("preset", "seed", "anatomy", "error")} for f in failures],
     }
 
@@ -537,7 +565,7 @@ def _run_varied(per_chain: int, seed: int, jitter: int) -> dict:
 def _format_varied(result: dict) -> str:
     head = (f"{'':<22}{'cases':>6}{'fail':>5}{'|MLD| mm':>9}{'p90':>7}{'|%DS|':>7}"
             f"{'|len| %':>8}{'|vol| %':>8}{'rigid mm':>9}{'max':>7}{'>0.6':>5}{'flag':>5}"
-            f"{'ms':>7}")
+            f"{'trace':>7}{'silent':>7}{'ms':>7}")
     lines = [f"End-to-end reconstruction, varied suite ({result['cases_per_chain']} cases per "
              f"chain, seed {result['seed']}; medians unless noted)", head, "-" * len(head)]
 
@@ -547,7 +575,8 @@ def _format_varied(result: dict) -> str:
                 f"{f['abs_length_error_pct']:>8.2f}{f['abs_volume_error_pct']:>8.1f}"
                 f"{f['centerline_3d_rms_rigid_mm']:>9.3f}"
                 f"{f['max_centerline_3d_rms_rigid_mm']:>7.2f}{f['cases_above_rigid_limit']:>5}"
-                f"{f['flagged_cases']:>5}{f['median_pipeline_ms']:>7.0f}")
+                f"{f['flagged_cases']:>5}{f['trace_success']:>7.2f}{f['traces_lost_unflagged']:>7}"
+                f"{f['median_pipeline_ms']:>7.0f}")
 
     lines += varied_rows(result, line, "-" * len(head))
     for f in result["failures"]:
@@ -562,6 +591,8 @@ def _format_varied(result: dict) -> str:
                  f"{t['max_centerline_3d_rms_rigid_mm']} mm rigid RMS; stability >= 0.9")
     lines.append("fail: the run raised (counted, with its reason above); flag: ran, but the "
                  "cross-view check listed stretches; rigid: 3D RMS after a rigid alignment")
+    lines.append("trace: the final traces of the cases that ran (both views) within "
+                 "2 px of the projected truth; silent: traces lost that no flag named")
     lines.append(f"{result['wall_s']:.0f} s wall")
     return "\n".join(lines)
 

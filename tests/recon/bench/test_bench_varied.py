@@ -17,7 +17,8 @@ CHAIN_KEYS = {"cases", "traces", "trace_success", "trace_success_answered", "ref
               "centerline_rms_px", "radius_bias_pct", "radius_mae_px"}
 RECON_KEYS = {"cases", "succeeded", "failed", "abs_mld_error_mm", "p90_abs_mld_error_mm",
               "abs_length_error_pct", "abs_volume_error_pct", "centerline_3d_rms_rigid_mm",
-              "max_centerline_3d_rms_rigid_mm", "failures"}
+              "max_centerline_3d_rms_rigid_mm", "failures", "trace_success",
+              "traces_lost_unflagged"}
 
 
 @pytest.fixture
@@ -122,6 +123,39 @@ def test_bench_reconstruct_varied_keys_and_stability(tiny_suite):
                 "site_spread_mm_median"):
         assert key in st["overall"]
     assert "click stability" in reconstruct.format_table(result)
+
+
+def test_final_traces_are_judged_against_the_truth_and_a_silent_loss_is_counted():
+    """The end-to-end rows judge each view's final trace as ``bench centerline`` does: the
+    projected truth itself is on it; the truth shifted 3 px across is lost, and counts
+    as silent only when the cross-view check named no stretch of that view."""
+    from types import SimpleNamespace
+
+    from recon.consistency import Stretch
+    from recon.types import Centerline2D
+
+    case = make_phantom("data1", 0, render=False)
+    pts_a = case.truth.segment_px(case.view_a)
+    pts_b = case.truth.segment_px(case.view_b_true)
+    shift = np.array([0.0, 3.0])
+
+    def rec(b_points, stretches):
+        def cl(p):
+            return Centerline2D(points_px=p, radius_px=np.full(len(p), 3.0),
+                                brightness=np.zeros(len(p)))
+        return SimpleNamespace(centerline_a=cl(pts_a), centerline_b=cl(b_points),
+                               consistency=SimpleNamespace(stretches=stretches))
+
+    on = reconstruct._trace_figures(case, rec(pts_b, []))
+    assert not on["trace_lost_a"] and not on["trace_lost_b"]
+    assert on["trace_gap_px_b"] < 0.1
+    off = reconstruct._trace_figures(case, rec(pts_b + shift, []))
+    assert off["trace_lost_b"] and off["trace_lost_unflagged_b"]
+    assert off["trace_gap_px_b"] == pytest.approx(3.0, abs=0.3)
+    told = Stretch("b", "off_vessel", 1.0, 4.0, (0.0, 0.0), 3.0, "off the vessel in view B")
+    flagged = reconstruct._trace_figures(case, rec(pts_b + shift, [told]))
+    assert flagged["trace_lost_b"] and not flagged["trace_lost_unflagged_b"]
+    assert not flagged["trace_lost_unflagged_a"]
 
 
 def test_unknown_suite_is_refused():
