@@ -18,7 +18,9 @@ same end-to-end figures per chain and overall: median and 90th percentile
 |MLD error|, median |length error| and |mesh volume error|, the 3D
 centerline RMS after a rigid (rotation + translation, not scaled)
 alignment to the truth (median and max), and the failed cases with their
-one-line reason.
+one-line reason. It also judges the two traces each reconstruction rests on as
+``bench centerline`` judges a trace (``trace_success``), and counts the lost ones
+the cross-view check did not flag (``traces_lost_unflagged``: wrong without a sign).
 
 ``suite="tree"`` and ``"tree-varied"``: phantom trees with bifurcation lesions,
 every branch in one reconstruction, the second through the imaging chains
