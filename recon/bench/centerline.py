@@ -263,8 +263,7 @@ def truth_gap_px(points_px: np.ndarray, view: ViewGeometry,
     """How far (px) each point of the projected true segment (every 0.1 px, the first and
     last :data:`END_EXCLUSION_PX` left out) lies from a trace ``points_px`` (N, 2), and
     the projected segment's length (px); ``view`` is the view's TRUE geometry and
-    ``truth`` the case's truth. A trace succeeds where no
-    gap exceeds :data:`SUCCESS_PX`."""
+    ``truth`` the case's truth. A trace succeeds where no gap exceeds :data:`SUCCESS_PX`."""
     seg, _ = _dense_truth(view, truth.segment_X_world, truth.segment_radius_mm, 0.1)
     seg_s = arclength(seg)
     seg_in = (seg_s >= END_EXCLUSION_PX) & (seg_s <= seg_s[-1] - END_EXCLUSION_PX)
