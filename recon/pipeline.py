@@ -471,10 +471,8 @@ def _trace_pair(
     intensity: tuple[str, str],
 ) -> tuple[Centerline2D, Centerline2D]:
     """Both views' traces (A, B), each by :func:`_trace`."""
-    names = ("A", "B")
-    cl_a, cl_b = (_trace(angios[k], clicks_px[k], vmaps[k], names[k], pixel_mm[k], intensity[k])
-                  for k in range(2))
-    return cl_a, cl_b
+    return (_trace(angios[0], clicks_px[0], vmaps[0], "A", pixel_mm[0], intensity[0]),
+            _trace(angios[1], clicks_px[1], vmaps[1], "B", pixel_mm[1], intensity[1]))
 
 
 def _trace(

@@ -85,6 +85,11 @@ def branch_color(k: int) -> tuple[int, int, int]:
     return BRANCH_COLORS[k % len(BRANCH_COLORS)][1]
 
 
+def _color_name(k: int) -> str:
+    """The name of branch ``k``'s colour, as the page says it."""
+    return BRANCH_COLORS[k % len(BRANCH_COLORS)][0]
+
+
 def is_tree(result: object) -> bool:
     """Whether a result is a tree reconstruction (recon.tree.TreeReconstruction)."""
     return hasattr(result, "branches")
@@ -148,10 +153,10 @@ def branch_heading(result: Result, shown: int) -> str:
     names = branch_names(result)
     link = result.seeds.segments[branches_of(result)[shown].options.segment]
     where = "" if link.parent is None else f", a branch of {link.parent} at {link.bifurcation}"
-    others = ", ".join(f"{n} ({BRANCH_COLORS[k % len(BRANCH_COLORS)][0]})"
+    others = ", ".join(f"{n} ({_color_name(k)})"
                        for k, n in enumerate(names) if k != shown)
     return (f"**Branch shown: {names[shown]}** "
-            f"({BRANCH_COLORS[shown % len(BRANCH_COLORS)][0]}{where}). Choose another "
+            f"({_color_name(shown)}{where}). Choose another "
             f"under **Branch** above (or Segment, in Marks): {others}.")
 
 
