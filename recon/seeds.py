@@ -36,6 +36,7 @@ __all__ = [
     "SeedsError",
     "seeds_from_dict",
     "SEEDS_VERSION",
+    "MAX_NAME_CHARS",
 ]
 
 #: The version this program writes for a tree (and the newest it reads).
@@ -189,11 +190,15 @@ def _entries(data: dict, key: str, source: str, limit: int) -> list:
     return value
 
 
+#: The most characters of a name a seeds file keeps.
+MAX_NAME_CHARS = 80
+
+
 def _name(value: object, default: str) -> str:
     if value is None:
         return default
     text = "".join(ch if ch.isprintable() else " " for ch in str(value)).strip()
-    return text[:80] or default
+    return text[:MAX_NAME_CHARS] or default
 
 
 def seeds_from_dict(data: object, source: str = "seeds") -> Seeds:

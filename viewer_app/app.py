@@ -471,25 +471,32 @@ class ViewerApp:
                 tree_view.show_branch(self.server.scene, self.views, self.panels, rec,
                                       self.model, self.shown_branch)
 
+    def _edit_marks(self, what: str, client: object | None, change: Callable[[], object]
+                    ) -> object:
+        """``change`` (an edit of ``self.state``) under the lock, then the marks redrawn and
+        autosaved; its value, or None with a notification when it refuses (guard)."""
+
+        def run() -> object:
+            with self._lock:
+                value = change()
+                self._redraw_marks()
+                self._autosave()
+                return value
+
+        return self.guard(what, client, run)
+
     def new_segment(self, name: str | None = None) -> int:
-        with self._lock:
-            index = self.state.new_segment(name)
-            self._redraw_marks()
-            self._autosave()
-            return index
+        return self._edit_marks("New segment", None, lambda: self.state.new_segment(name))
 
     def new_branch(self, client: object | None = None) -> int | None:
         """A branch of the current segment leaving it at the selected landmark (state's
         ``new_branch``); its index, or None with a notification saying what to click."""
+        return self._edit_marks("New branch", client, self.state.new_branch)
 
-        def run() -> int:
-            with self._lock:
-                index = self.state.new_branch()
-                self._redraw_marks()
-                self._autosave()
-                return index
-
-        return self.guard("New branch", client, run)
+    def rename_segment(self, name: str, client: object | None = None) -> str | None:
+        """Rename the current segment (state's ``rename_segment``); the name kept, or None
+        with a notification saying what is wrong with ``name``."""
+        return self._edit_marks("Rename", client, lambda: self.state.rename_segment(name))
 
     def select(self, mark_id: int | None) -> None:
         with self._lock:
@@ -505,18 +512,11 @@ class ViewerApp:
                 self.select(mark_id)
 
     def undo(self) -> bool:
-        with self._lock:
-            done = self.state.undo()
-            self._redraw_marks()
-            self._autosave()
-            return done
+        return bool(self._edit_marks("Undo", None, self.state.undo))
 
     def clear(self) -> None:
-        with self._lock:
-            self.state.clear()
-            self._redraw_marks()
-            self._autosave()
-            scene.draw_refusal(self.server.scene, self.views, None)  # its marks are gone
+        self._edit_marks("Clear marks", None, self.state.clear)
+        scene.draw_refusal(self.server.scene, self.views, None)  # its marks are gone
 
     @property
     def epipolar_segments(self) -> dict[str, FloatArray | None]:

@@ -108,6 +108,8 @@ class MarksPanel:
     guide: viser.GuiMarkdownHandle  # what the next click in A and in B places
     mode: viser.GuiDropdownHandle
     segment: viser.GuiDropdownHandle
+    name: viser.GuiTextHandle  # the current segment's name, to rename it
+    rename: viser.GuiButtonHandle
     new_segment: viser.GuiButtonHandle
     new_branch: viser.GuiButtonHandle  # a branch of the current segment at the selected landmark
     select: viser.GuiDropdownHandle
@@ -249,11 +251,15 @@ class Panels:
         with self.refreshing.during():
             if panel.mode.value != MODE_LABELS[st.mode]:
                 panel.mode.value = MODE_LABELS[st.mode]
+            current = st.segment_names[st.current_segment]
+            shown = (panel.segment.value, tuple(panel.segment.options))
+            if shown != (current, tuple(st.segment_names)):  # else a name being typed stays
+                panel.name.value = current
             panel.segment.options = tuple(st.segment_names)
-            panel.segment.value = st.segment_names[st.current_segment]
+            panel.segment.value = current
             branch = self.results.branch
-            if st.segment_names[st.current_segment] in branch.options:
-                branch.value = st.segment_names[st.current_segment]
+            if current in branch.options:
+                branch.value = current
             options = ["(none)"] + [f"{m.view.upper()} {st.label(m)} #{m.id}" for m in st.marks]
             panel.select.options = tuple(options)
             sel = st.selected
@@ -452,6 +458,14 @@ def _marks_panel(gui: viser.GuiApi, app: ViewerApp, refreshing: Refreshing) -> M
                 return
             app.guard("Segment", event.client, lambda: app.set_segment(segment.value))
 
+        name = gui.add_text("Segment name", "Segment 1", hint="The current segment's name (LAD, "
+                            "D1, ...): type it, then press Rename segment")
+        rename = gui.add_button("Rename segment", icon=viser.Icon.PENCIL)
+
+        @rename.on_click
+        async def _(event: viser.GuiEvent) -> None:
+            app.rename_segment(name.value, client=event.client)
+
         new_segment = gui.add_button("New segment", icon=viser.Icon.PLUS)
 
         @new_segment.on_click
@@ -488,9 +502,9 @@ def _marks_panel(gui: viser.GuiApi, app: ViewerApp, refreshing: Refreshing) -> M
             app.clear()
 
         summary = gui.add_markdown("")
-    return MarksPanel(warning=warning, guide=guide, mode=mode, segment=segment,
-                      new_segment=new_segment, new_branch=new_branch, select=select,
-                      undo=undo, clear=clear, summary=summary)
+    return MarksPanel(warning=warning, guide=guide, mode=mode, segment=segment, name=name,
+                      rename=rename, new_segment=new_segment, new_branch=new_branch,
+                      select=select, undo=undo, clear=clear, summary=summary)
 
 
 GEOMETRY_WORDS = {"sid_mm": "SID (mm)", "sod_mm": "SOD (mm)",

@@ -34,7 +34,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from recon.geometry import ViewGeometry, epipolar_lines
-from recon.seeds import Feature, Seeds, Segment, seeds_from_dict
+from recon.seeds import MAX_NAME_CHARS, Feature, Seeds, Segment, seeds_from_dict
 
 __all__ = [
     "MODES",
@@ -314,6 +314,25 @@ class MarkState:
         """(parent segment, bifurcation landmark) of the segment called ``name`` when it is
         a branch, else None."""
         return self.segment_links.get(name)
+
+    def rename_segment(self, name: str) -> str:
+        """Rename the current segment (one undo step); the links of its branches, and its
+        own, follow. Returns the name as kept (spaces collapsed). Raises ValueError
+        saying what is wrong with an empty or over-long name, or one another segment has.
+        """
+        new = " ".join("".join(ch if ch.isprintable() else " " for ch in str(name)).split())
+        old = self.segment_names[self.current_segment]
+        if not new or len(new) > MAX_NAME_CHARS:
+            raise ValueError(f"Rename: type a name of 1 to {MAX_NAME_CHARS} characters for "
+                             f"{old!r} in the Segment name field first")
+        if new != old and new in self.segment_names:
+            raise ValueError(f"Rename: another segment is already called {new!r}")
+        if new != old:
+            self._push()
+            self.segment_names[self.current_segment] = new
+            self.segment_links = {(new if k == old else k): (new if p == old else p, f)
+                                  for k, (p, f) in self.segment_links.items()}
+        return new
 
     def set_current_segment(self, index: int) -> None:
         if not 0 <= index < len(self.segment_names):
@@ -632,29 +651,8 @@ class MarkState:
             if mark is None or any(m.id == mark.id for m in marks):
                 continue
             marks.append(mark)
-        names_in = viewer.get("segment_names")
-        names = [n for n in names_in if isinstance(n, str)] if isinstance(names_in, list) else []
         needed = max((m.group + 1 for m in marks if m.kind != "feature"), default=1)
-        names += [f"Segment {k + 1}" for k in range(len(names), needed)]
-        features_in = viewer.get("feature_names")
-        feature_names = {}
-        if isinstance(features_in, dict):
-            for key, name in features_in.items():
-                if isinstance(key, str) and key.isdigit() and isinstance(name, str):
-                    feature_names[int(key)] = name
-        links_in = viewer.get("segment_links")
-        links = {}
-        if isinstance(links_in, dict):
-            for name, link in links_in.items():
-                if (isinstance(link, list) and len(link) == 2
-                        and all(isinstance(x, str) for x in (name, *link))):
-                    links[name] = (link[0], link[1])
-        elif links_in is None:  # an autosave from before the links: its seeds part has them
-            for entry in doc.get("segments") or ():
-                link = [entry.get(k) for k in ("name", "parent", "bifurcation")] \
-                    if isinstance(entry, dict) else []
-                if link and all(isinstance(x, str) for x in link):
-                    links[link[0]] = (link[1], link[2])
+        names, feature_names, links = read_names(doc, viewer, needed)
         self._push()
         self.marks = marks
         self.segment_names = names or ["Segment 1"]
@@ -689,4 +687,5 @@ def _mark_or_none(entry: object) -> Mark | None:
 from viewer_app.autosave import (  # noqa: E402
     Autosave,
     default_autosave_path,
+    read_names,
 )

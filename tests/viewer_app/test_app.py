@@ -391,3 +391,26 @@ def test_a_refused_trace_is_ringed_where_it_asks_for_a_waypoint(app: ViewerApp) 
     assert app.server.scene.get_handle_by_name("/over_a/refusal") is not None
     app.clear()
     assert app.server.scene.get_handle_by_name("/over_a/refusal") is None
+
+
+def test_the_current_segment_is_renamed_from_the_name_field(app: ViewerApp) -> None:
+    """The Name field shows the current segment's name; Rename segment renames it (a taken
+    name is a notification, the field keeping what was typed), and a name being typed stays
+    in the field while marks are placed."""
+    app.load_seeds_upload(json.dumps(app.seeds().to_dict()).encode())
+    marks = app.panels.marks
+    assert marks.name.value == app.state.segment_names[0]
+    assert app.rename_segment("LAD") == "LAD"
+    assert marks.name.value == "LAD" and tuple(marks.segment.options) == ("LAD",)
+    assert app.seeds().segments[0].name == "LAD"
+    index = app.new_segment()
+    assert marks.name.value == app.state.segment_names[index] != "LAD"
+    marks.name.value = "LAD"
+    assert app.rename_segment(marks.name.value) is None
+    assert app.notifications[-1][:2] == ("error", "Rename failed")
+    assert "already called 'LAD'" in app.notifications[-1][2]
+    app.set_mode("feature")
+    app.click("a", 100.0, 100.0)  # a mark placed while a name is being typed
+    assert marks.name.value == "LAD"
+    assert app.undo() and app.undo() and app.undo()
+    assert app.state.segment_names == [app.seeds().segments[0].name] != ["LAD"]

@@ -604,6 +604,14 @@ def test_a_branch_added_from_a_landmark_and_the_tree_shown_branch_by_branch(
             assert app.state.segment_links["Segment 3"] == ("long arc", "arc/upper")
             _wait(lambda: b.dropdown_value("Segment") == "Segment 3", 10,
                   "the page's Segment dropdown to show the branch")
+            field = b.text_field("Segment name")  # the clinician names the branch
+            field.fill("upper branch")
+            b.page.get_by_role("button", name="Rename segment").click()
+            _wait(lambda: app.state.segment_names[2] == "upper branch", 10, "the rename")
+            assert app.state.segment_links["upper branch"] == ("long arc", "arc/upper")
+            assert "Segment 3" not in app.state.segment_links
+            _wait(lambda: b.dropdown_value("Segment") == "upper branch", 10,
+                  "the page's Segment dropdown to show the new name")
             for view, pts in (("a", upper.a_px), ("b", upper.b_px)):
                 new, notes = b.click(view, *pts[-1])  # guided: the distal end
                 assert new is not None and new.kind == "distal", notes

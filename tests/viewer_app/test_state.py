@@ -396,3 +396,41 @@ def test_a_branch_starts_at_the_selected_landmark_undoably_and_survives_the_auto
     named.load_seeds(seeds_from_dict({"segments": [
         {"name": "Segment 2", "a": [[1, 2], [3, 4]], "b": [[5, 6], [7, 8]]}]}))
     assert named.segment_names[named.new_segment()] == "Segment 3"
+
+
+def test_renaming_a_segment_carries_its_branch_links_undoably_into_the_seeds(
+        tmp_path: Path) -> None:
+    """A clinician names the vessels (LAD, D1): the current segment is renamed, the link of
+    its branch and its own link follow, one undo step brings the old names back, and an
+    empty, over-long or taken name is refused with a message saying so."""
+    st = _state()
+    for view, col, row in (("a", 10, 20), ("a", 100, 120), ("b", 11, 21), ("b", 90, 95)):
+        st.click(view, col, row)
+    st.click("a", 60, 70)
+    st.click("b", 50, 55)  # a landmark in both views, selected
+    st.new_branch()
+    st.click("a", 20, 160)
+    st.click("b", 30, 150)
+    st.set_current_segment(0)
+    assert st.rename_segment("  LAD \n") == "LAD"  # spaces and a line break collapsed
+    st.set_current_segment(1)
+    assert st.rename_segment("D1") == "D1"
+    assert st.segment_names == ["LAD", "D1"]
+    assert st.segment_links == {"D1": ("LAD", "feature 1")}
+    seeds = st.to_seeds()
+    assert [(s.name, s.parent) for s in seeds.segments] == [("LAD", None), ("D1", "LAD")]
+    assert seeds_from_dict(seeds.to_dict()) == seeds
+    for bad, said in (("   ", "type a name"), ("x" * 81, "1 to 80 characters"),
+                      ("LAD", "already called 'LAD'")):
+        with pytest.raises(ValueError, match=said):
+            st.rename_segment(bad)
+    assert st.segment_names == ["LAD", "D1"]
+    assert st.rename_segment("D1") == "D1" and st.undo()  # the same name: no undo step
+    assert st.segment_names == ["LAD", "Segment 2"]
+    assert st.segment_links == {"Segment 2": ("LAD", "feature 1")}
+    store = Autosave(tmp_path / "auto.json", str(tmp_path / "a.dcm"), str(tmp_path / "b.dcm"))
+    store.save(st)
+    restored = _state()
+    assert store.load_into(restored, None)
+    assert restored.segment_names == ["LAD", "Segment 2"]
+    assert restored.segment_links == st.segment_links
