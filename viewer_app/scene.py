@@ -55,6 +55,7 @@ __all__ = [
     "draw_refusal",
     "draw_reconstruction",
     "model_placement",
+    "label_places",
     "diameter_colors",
     "lesion_points",
     "automatic_marks",
@@ -259,6 +260,14 @@ LABEL_PLACES = ((np.array([0.008, 0.008, 0.0]), "top-left"),
                 (np.array([-0.008, 0.0, 0.0]), "center-right"))
 
 
+def label_places(pts: FloatArray) -> list[tuple[FloatArray, str]]:
+    """Where the label of each mark at ``pts`` (M, 3) goes (:data:`LABEL_PLACES`): a mark
+    on the same spot as an earlier one (a branch's start on its bifurcation landmark) on
+    another side of it, so that the two labels do not draw over each other."""
+    same = np.linalg.norm(pts[:, None, :2] - pts[None, :, :2], axis=2) < 1e-4
+    return [LABEL_PLACES[min(int(j), 2)] for j in np.tril(same, -1).sum(axis=1)]
+
+
 def draw_marks(scene: viser.SceneApi, views: Mapping[str, View], st: MarkState) -> None:
     """Marks, labels, selection and the epipolar line of the selected mark."""
     sel = st.selected
@@ -274,16 +283,10 @@ def draw_marks(scene: viser.SceneApi, views: Mapping[str, View], st: MarkState) 
         v.nodes.selected.points = sel_pts.astype(np.float32)
         for h in v.nodes.labels:
             h.remove()
-        # A mark on the same spot as an earlier one (a branch's start on its bifurcation
-        # landmark) is labelled on another side of it: the two labels drew over each other.
-        same = np.linalg.norm(pts[:, None, :2] - pts[None, :, :2], axis=2) < 1e-4
-        earlier = np.tril(same, -1).sum(axis=1)
         v.nodes.labels = [
-            scene.add_label(
-                f"{overlay_name(v.key)}/labels/m{m.id}", st.label(m),
-                position=tuple(p + LABEL_PLACES[min(j, 2)][0]),
-                anchor=LABEL_PLACES[min(j, 2)][1], font_screen_scale=0.8)
-            for m, p, j in zip(marks, pts, earlier, strict=True)
+            scene.add_label(f"{overlay_name(v.key)}/labels/m{m.id}", st.label(m),
+                            position=tuple(p + offset), anchor=anchor, font_screen_scale=0.8)
+            for m, p, (offset, anchor) in zip(marks, pts, label_places(pts), strict=True)
         ]
         if epi is not None and epi[0] == v.key:
             seg = v.local_from_px(epi[1], z=OVERLAY_Z * 1.5)[None]

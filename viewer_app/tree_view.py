@@ -33,6 +33,7 @@ from viewer_app.scene import (
     draw_lesion_marks,
     draw_reconstruction,
     draw_refusal,
+    label_places,
     model_placement,
     overlay_name,
     polyline_segments,
@@ -57,6 +58,7 @@ __all__ = [
     "highlight_branch",
     "is_tree",
     "mesh_colors",
+    "name_place",
     "run_reconstruction",
     "seeds_for_run",
     "show_branch",
@@ -78,6 +80,14 @@ BRANCH_COLORS: tuple[tuple[str, tuple[int, int, int]], ...] = (
 FADE, FADE_TO = 0.6, (210, 210, 210)  # the mesh of the branches not shown: paler
 CENTERLINE_SHADE = 0.55  # a branch's 3D centerline: its colour darkened to this fraction
 THIN_PX, THICK_PX, SHOWN_PX = 1.2, 2.5, 4.5  # trace, back-projection, the shown branch's
+#: Where a branch's name may go beside its distal end on an image (offset in scene units,
+#: anchor), above right first (the end mark's own label is below right).
+NAME_PLACES = ((np.array([0.01, -0.01]), "bottom-left"), (np.array([-0.01, -0.01]), "bottom-right"),
+               (np.array([-0.01, 0.01]), "top-right"), (np.array([0.01, 0.01]), "top-left"))
+#: A label's size on the page in scene units (an image is 1 wide): per character of a
+#: branch's name, a mark's label (a few characters) and the height of both, and a mark's
+#: dot's radius, as measured on the browser tests' screenshots.
+NAME_CHAR, MARK_LABEL_WIDTH, LABEL_HEIGHT, DOT_RADIUS = 0.012, 0.045, 0.03, 0.008
 
 
 def branch_color(k: int) -> tuple[int, int, int]:
@@ -187,6 +197,37 @@ def show_branch(scene: viser.SceneApi, views: Mapping[str, View], panels: Panels
     panels.show_tree(result, index)
 
 
+def _label_box(at: NDArray[np.float64], anchor: str, width: float) -> NDArray[np.float64]:
+    """The box (x0, x1, y0, y1) of a label of ``width`` placed at ``at`` (2,) by its
+    ``anchor`` (viser's "top-left", ..., "center-right"; y grows downwards)."""
+    vertical, horizontal = anchor.split("-")
+    x0 = at[0] - (width if horizontal == "right" else 0.0)
+    y0 = at[1] - {"top": 0.0, "center": LABEL_HEIGHT / 2, "bottom": LABEL_HEIGHT}[vertical]
+    return np.array([x0, x0 + width, y0, y0 + LABEL_HEIGHT])
+
+
+def name_place(end_xy: NDArray[np.float64], name: str, marks_xyz: NDArray
+               ) -> tuple[NDArray[np.float64], str]:
+    """Where a branch's name goes beside its distal end ``end_xy`` (2,) on an image whose
+    marks are at ``marks_xyz`` (M, 3) (scene units, the image's frame): the first of
+    :data:`NAME_PLACES` whose text clears every mark's dot and label (placed as
+    scene.draw_marks places them), else the one that meets fewest. Returns (offset (2,),
+    anchor)."""
+    marks = np.asarray(marks_xyz, dtype=float).reshape(-1, 3)
+    boxes = [np.array([x - DOT_RADIUS, x + DOT_RADIUS, y - DOT_RADIUS, y + DOT_RADIUS])
+             for x, y in marks[:, :2]]
+    boxes += [_label_box(p[:2] + offset[:2], anchor, MARK_LABEL_WIDTH)
+              for p, (offset, anchor) in zip(marks, label_places(marks), strict=True)]
+    taken = np.array(boxes).reshape(-1, 4)
+    hits = []
+    for offset, anchor in NAME_PLACES:
+        x0, x1, y0, y1 = _label_box(end_xy + offset, anchor, NAME_CHAR * len(name))
+        hits.append(int(np.count_nonzero((taken[:, 1] > x0) & (taken[:, 0] < x1)
+                                         & (taken[:, 3] > y0) & (taken[:, 2] < y1))))
+    offset, anchor = NAME_PLACES[int(np.argmin(hits))]
+    return np.asarray(offset, dtype=float), anchor
+
+
 def _shade(rgb: tuple[int, int, int], fraction: float) -> tuple[int, int, int]:
     """``rgb`` darkened to ``fraction`` of its brightness."""
     return tuple(int(round(c * fraction)) for c in rgb)
@@ -264,10 +305,9 @@ def highlight_branch(scene: viser.SceneApi, views: Mapping[str, View],
             back_local = v.local_from_px(geom.project(X_world), z=OVERLAY_Z * 1.2)
             scene.add_line_segments(f"{root}/backproj", polyline_segments(back_local).astype(
                 np.float32), rgb, thickness=thickness_px, thickness_units="screen")
-            # above right of the distal end (its mark's label is below right)
-            scene.add_label(f"{root}/name", name,
-                            position=tuple(back_local[-1] + [0.008, -0.008, 0.0]),
-                            anchor="bottom-left", font_screen_scale=0.8)
+            offset, anchor = name_place(back_local[-1, :2], name, v.nodes.marks.points)
+            scene.add_label(f"{root}/name", name, anchor=anchor, font_screen_scale=0.8,
+                            position=(*(back_local[-1, :2] + offset), back_local[-1, 2]))
         X_scene = X_world @ T[:3, :3].T + T[:3, 3]
         scene.add_line_segments(f"/model/branches/b{k}", polyline_segments(X_scene).astype(
             np.float32), _shade(rgb, CENTERLINE_SHADE), thickness=thickness_px,

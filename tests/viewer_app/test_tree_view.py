@@ -178,3 +178,18 @@ def test_new_branch_from_landmark_in_the_app(tree_app: ViewerApp) -> None:
     assert app.undo()
     assert app.state.segment_names == [s.name for s in load_seeds(SEEDS).segments]
     assert "Segment 4" not in app.state.segment_links
+
+
+def test_a_branch_name_goes_where_no_mark_or_its_label_lies() -> None:
+    """Beside a distal end with only its own mark, the name goes above right; with a
+    landmark and its label there (as "long arc" over D1 / F2 in IM8), to a clear side."""
+    from viewer_app.tree_view import NAME_PLACES, name_place
+
+    end = np.array([0.2, 0.1])
+    alone = np.array([[0.2, 0.1, 0.0]])  # the branch's own distal mark
+    offset, anchor = name_place(end, "long arc", alone)
+    assert anchor == NAME_PLACES[0][1] and np.allclose(offset, NAME_PLACES[0][0])
+    crowded = np.vstack([alone, [[0.23, 0.08, 0.0], [0.26, 0.07, 0.0]]])  # up and right
+    offset, anchor = name_place(end, "long arc", crowded)
+    assert anchor != NAME_PLACES[0][1]
+    assert offset[0] < 0  # the text runs to the left, away from the landmarks
