@@ -485,7 +485,7 @@ class ViewerApp:
 
         return self.guard(what, client, run)
 
-    def new_segment(self, name: str | None = None) -> int:
+    def new_segment(self, name: str | None = None) -> int | None:
         return self._edit_marks("New segment", None, lambda: self.state.new_segment(name))
 
     def new_branch(self, client: object | None = None) -> int | None:
