@@ -39,12 +39,7 @@ from viewer_app.panels import Panels, build_panels
 from viewer_app.progress import loading_notes
 from viewer_app.results import close_views_warning
 from viewer_app.scene import LAYOUTS, ModelNodes, View
-from viewer_app.state import (
-    Autosave,
-    Mark,
-    MarkState,
-    default_autosave_path,
-)
+from viewer_app.state import Autosave, Mark, MarkState, default_autosave_path
 
 if TYPE_CHECKING:
     from recon.calibration import CalibrationResult
@@ -236,15 +231,8 @@ class ViewerApp:
             v.get_vesselness()
 
     # ================================================================ pair
-    def _set_pair(
-        self,
-        angio_a: Angiogram,
-        angio_b: Angiogram,
-        name_a: str,
-        name_b: str,
-        seeds: Seeds | None,
-        seeds_path: str | None,
-    ) -> None:
+    def _set_pair(self, angio_a: Angiogram, angio_b: Angiogram, name_a: str, name_b: str,
+                  seeds: Seeds | None, seeds_path: str | None) -> None:
         with self._lock:
             self.views = {"a": View("a", angio_a, name_a), "b": View("b", angio_b, name_b)}
             self.state = MarkState(angio_a.geometry, angio_b.geometry, snapper=self._snap)
@@ -474,11 +462,19 @@ class ViewerApp:
     def _edit_marks(self, what: str, client: object | None, change: Callable[[], object]
                     ) -> object:
         """``change`` (an edit of ``self.state``) under the lock, then the marks redrawn and
-        autosaved; its value, or None with a notification when it refuses (guard)."""
+        autosaved, and a segment renamed in the results shown too; its value, or None with
+        a notification when it refuses (guard)."""
 
         def run() -> object:
             with self._lock:
+                before = list(self.state.segment_names)
                 value = change()
+                rec = self.reconstruction and tree_view.renamed(
+                    self.reconstruction, before, self.state.segment_names)
+                if rec is not None and self.model is not None:
+                    self.reconstruction = rec
+                    tree_view.show_branch(self.server.scene, self.views, self.panels, rec,
+                                          self.model, self.shown_branch, tree_view.is_tree(rec))
                 self._redraw_marks()
                 self._autosave()
                 return value

@@ -15,6 +15,7 @@ part of the mesh in full colour (the others' paler).
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
+from dataclasses import replace
 from functools import lru_cache
 from typing import TYPE_CHECKING
 
@@ -59,6 +60,7 @@ __all__ = [
     "is_tree",
     "mesh_colors",
     "name_place",
+    "renamed",
     "run_reconstruction",
     "seeds_for_run",
     "show_branch",
@@ -155,6 +157,29 @@ def summary_text(result: Result) -> str:
         else f"{length_mm:.1f} mm centerline"
     return (f"{what}, {len(mesh.faces)} faces, "
             f"{result.timings_ms.get('total', 0):.0f} ms")
+
+
+def renamed(result: Result, before: list[str], after: list[str]) -> Result | None:
+    """``result`` with its segment renamed as the marks' segment names went from ``before``
+    to ``after`` (a Rename, or the undo of one: the same count, one name changed), in its
+    seeds, its branches' seeds and its bifurcations; None when that is not the change, or
+    the result has no segment of the old name."""
+    changed = [(o, n) for o, n in zip(before, after, strict=False) if o != n]
+    if len(before) != len(after) or len(changed) != 1:
+        return None
+    old, new = changed[0]
+    if old not in [s.name for s in result.seeds.segments]:
+        return None
+    seeds = replace(result.seeds, segments=tuple(
+        replace(s, name=new if s.name == old else s.name,
+                parent=new if s.parent == old else s.parent) for s in result.seeds.segments))
+    if not is_tree(result):
+        return replace(result, seeds=seeds)
+    return replace(result, seeds=seeds,
+                   branches=tuple(replace(b, seeds=seeds) for b in result.branches),
+                   bifurcations=tuple(replace(q, parent=new if q.parent == old else q.parent,
+                                              branch=new if q.branch == old else q.branch)
+                                      for q in result.bifurcations))
 
 
 def branch_heading(result: Result, shown: int) -> str:

@@ -10,6 +10,7 @@ tree's; and "New branch from landmark" links a branch to its parent.
 from __future__ import annotations
 
 import io
+import json
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -193,3 +194,38 @@ def test_a_branch_name_goes_where_no_mark_or_its_label_lies() -> None:
     offset, anchor = name_place(end, "long arc", crowded)
     assert anchor != NAME_PLACES[0][1]
     assert offset[0] < 0  # the text runs to the left, away from the landmarks
+
+
+def test_a_segment_renamed_after_reconstruct_is_renamed_in_the_results(
+        tree_app: ViewerApp) -> None:
+    """Renaming a reconstructed segment renames its branch in the results shown (the Branch
+    choice, the line above the table, the bifurcation table, the names on the images and
+    report.json), without a new Reconstruct; undoing the rename undoes it there too."""
+    app = tree_app
+    names = [s.name for s in load_seeds(SEEDS).segments]
+    assert app.reconstruct() is not None, app.notifications[-3:]
+    app.set_segment(names[1])
+    assert app.rename_segment("D1") == "D1"
+    results = app.panels.results
+    assert tuple(results.branch.options) == (names[0], "D1", names[2])
+    assert results.branch.value == "D1" and app.shown_branch == 1
+    assert "**Branch shown: D1**" in results.branch_note.content
+    parent = load_seeds(SEEDS).segments[1].parent
+    assert f"{parent} › D1" in results.bifurcations.content
+    assert names[1] not in results.bifurcations.content
+    for key in ("a", "b"):
+        assert _node(app, f"/over_{key}/branches/b1/name").text == "D1"
+    report = json.loads(app.export("report.json"))
+    assert [b["inputs"]["segment"] for b in report["branches"]] == [names[0], "D1", names[2]]
+    assert [b["parent"] for b in report["branches"]][1] == parent
+    app.set_segment(names[2])  # the renamed branch is chosen by its new name
+    app.set_segment("D1")
+    assert app.shown_branch == 1 and app.state.segment_names[1] == "D1"
+    assert app.undo()
+    assert tuple(results.branch.options) == tuple(names)
+    assert _node(app, "/over_a/branches/b1/name").text == names[1]
+    app.set_segment(names[0])  # the parent renamed: its branches' links follow
+    assert app.rename_segment("LAD") == "LAD"
+    assert f"LAD › {names[1]}" in results.bifurcations.content
+    report = json.loads(app.export("report.json"))
+    assert [b["parent"] for b in report["branches"]] == [None, "LAD", "LAD"]
