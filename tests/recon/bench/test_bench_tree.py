@@ -2,17 +2,20 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 from support import run_cli
 
+from recon.bench.common import pose_error
 from recon.bench.reconstruct import format_table, run
-from recon.bench.tree import STENOSIS_PCT_RANGE, tree_jobs, true_bifurcation
+from recon.bench.tree import STENOSIS_PCT_RANGE, _scale_free_tree_mm, tree_jobs, true_bifurcation
 from recon.synth.chains import CHAINS
 from recon.synth.tree import make_tree_case
 
 KEYS = {"cases", "mld_err_mean_mm", "mld_err_sd_mm", "ref_diam_err_mean_mm",
         "bifurcation_angle_err_mean_deg", "bifurcation_angle_err_sd_deg",
-        "pose_better_than_header", "watertight_single_component", "failed"}
+        "pose_better_than_header", "pose_better_than_header_scale_free",
+        "watertight_single_component", "failed"}
 
 
 def test_one_tree_case_gives_every_key():
@@ -62,3 +65,19 @@ def test_the_true_bifurcation_qca_finds_the_phantoms_ostial_lesion():
     assert side[-1] == pytest.approx(60.0, abs=0.1)  # the ostial lesion as drawn
     assert all(abs(x) < 0.5 for x in side[:-1])  # the healthy branches
     assert sorted(q.medina for q in qca)[-1] == "0,0,1"
+
+
+def test_the_trees_3d_error_is_blind_to_the_unobservable_baseline_length():
+    """The tree's scale-free 3D error (the observable part of B's pose): zero at B's true
+    pose and after a pure shift of B's rig along the baseline, which moves the rig by 20 mm
+    (the pose displacement sees it; two views cannot); a rotation of B's rig shows."""
+    tc = make_tree_case("data1", 0, "ostium", stenosis_pct=60.0, render=False)
+    case, X = tc.case, tc.case.truth.segment_X_world
+    true_b = case.view_b_true
+    assert _scale_free_tree_mm(X, case, true_b) < 1e-6
+    baseline = true_b.source_world - case.view_a.source_world
+    along = true_b.with_correction(np.zeros(3), 20.0 * baseline / np.linalg.norm(baseline))
+    assert _scale_free_tree_mm(X, case, along) < 1e-3
+    assert pose_error(along, true_b, X)[1] > 19.0
+    turned = true_b.with_correction(np.deg2rad([0.0, 0.0, 1.0]), np.zeros(3))
+    assert _scale_free_tree_mm(X, case, turned) > 0.1
