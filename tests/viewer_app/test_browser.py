@@ -650,6 +650,18 @@ def test_a_branch_added_from_a_landmark_and_the_tree_shown_branch_by_branch(
             _wait(lambda: app.layout == "3D model", 10, "the 3D model")
             b.page.wait_for_timeout(1000)
             b.shot("tree_5_model.png")
+            # Renamed after Reconstruct: the results shown take the name, no new run.
+            b.choose("Show", "Angiograms + 3D")
+            field = b.text_field("Segment name")
+            field.fill("D1")
+            b.page.get_by_role("button", name="Rename segment").click()
+            _wait(lambda: b.dropdown_value("Branch") == "D1", 10,
+                  "the page's Branch dropdown to show the new name")
+            assert "long arc › D1" in app.panels.results.bifurcations.content
+            b.page.get_by_text("Branch shown: D1").first.wait_for(state="visible",
+                                                                  timeout=10_000)
+            b.page.wait_for_timeout(800)
+            b.shot("tree_6_renamed.png")
         finally:
             b.close()
             app.stop()
