@@ -32,8 +32,14 @@ import time
 from collections import Counter
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
+# tests/ holds a folder named recon (the tests of the package, no __init__.py): on the path
+# first, it would be imported as the package under an editable install. The package is
+# imported first, then tests/ goes on the path for fuzz_cases.
+_TESTS = Path(__file__).resolve().parent
+sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != _TESTS]
+import recon.io  # noqa: E402, F401
 
+sys.path.append(str(_TESTS))
 from fuzz_cases import failure, make_cases, run_in_process  # noqa: E402
 
 
