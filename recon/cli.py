@@ -621,7 +621,17 @@ COMMANDS = {
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run one command; returns the exit code (argparse's own errors exit 2 through SystemExit)."""
+    """Run one command; returns the exit code (argparse's own errors exit 2 through SystemExit).
+
+    A SIGTERM or SIGINT is exit 128 + its number, whenever it comes: also in the instant
+    before the command starts or while the signal handlers are put back after it."""
+    try:
+        return _main(argv)
+    except KeyboardInterrupt as exc:  # recon.io.output_set.Terminated included
+        return 128 + int(getattr(exc, "signum", 2))  # 2: SIGINT
+
+
+def _main(argv: Sequence[str] | None) -> int:
     import signal
 
     from recon.io.output_set import Terminated, raise_on_termination
@@ -633,6 +643,8 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     args = build_parser().parse_args(argv)
     handlers = {sig: signal.getsignal(sig) for sig in (signal.SIGTERM, signal.SIGINT)}
+    if _REAL_PROCESS:  # a signal after the command ends the process (no Python handler)
+        handlers = dict.fromkeys(handlers, signal.SIG_DFL)
     raise_on_termination()  # SIGTERM / SIGINT clean up temporary files on their way out
     try:
         return COMMANDS[args.command](args)

@@ -126,3 +126,41 @@ def test_a_folder_in_place_of_report_json_is_refused_before_any_work(tmp_path: P
     assert_one_line_error(proc, str(out / "report.json"), "is a folder")
     assert "tracing" not in proc.stderr  # refused before the reconstruction, not after
     assert sorted(p.name for p in out.iterdir()) == ["report.json"]
+
+
+@pytest.mark.parametrize("when", ["just before the command", "as the handlers are put back"])
+def test_a_signal_at_the_edges_of_the_command_is_an_exit_code_not_a_traceback(
+    monkeypatch: pytest.MonkeyPatch, when: str
+) -> None:
+    """A SIGINT (raised by the handler, as it would be) in the instant after the handlers
+    are installed or while they are put back after the command: exit 130, as during the
+    command (a fuzz run saw a traceback from the second)."""
+    from recon import cli
+    from recon.io import output_set
+
+    saved = {sig: signal.getsignal(sig) for sig in (signal.SIGTERM, signal.SIGINT)}
+    monkeypatch.setitem(cli.COMMANDS, "info", lambda args: 0)
+    if when == "just before the command":
+        install = output_set.raise_on_termination
+
+        def installed_then_signalled() -> None:
+            install()
+            raise output_set.Terminated(signal.SIGINT)
+
+        monkeypatch.setattr(output_set, "raise_on_termination", installed_then_signalled)
+    else:
+        real, calls = signal.signal, []
+
+        def put_back(sig: int, handler: object) -> object:
+            calls.append(sig)
+            if len(calls) == 3:  # the first one after raise_on_termination's two
+                raise output_set.Terminated(signal.SIGINT)
+            return real(sig, handler)
+
+        monkeypatch.setattr(signal, "signal", put_back)
+    try:
+        assert cli.main(["info", str(DEMO / "a.dcm")]) == 128 + signal.SIGINT
+    finally:
+        monkeypatch.undo()
+        for sig, handler in saved.items():
+            signal.signal(sig, handler)
