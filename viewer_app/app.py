@@ -462,15 +462,15 @@ class ViewerApp:
     def _edit_marks(self, what: str, client: object | None, change: Callable[[], object]
                     ) -> object:
         """``change`` (an edit of ``self.state``) under the lock, then the marks redrawn and
-        autosaved, and a segment renamed in the results shown too; its value, or None with
-        a notification when it refuses (guard)."""
+        autosaved (a Rename or its Undo also renames the segment in the results shown); its
+        value, or None with a notification when it refuses (guard)."""
 
         def run() -> object:
             with self._lock:
                 before = list(self.state.segment_names)
                 value = change()
-                rec = self.reconstruction and tree_view.renamed(
-                    self.reconstruction, before, self.state.segment_names)
+                rec = None if self.reconstruction is None or what not in ("Rename", "Undo") \
+                    else tree_view.renamed(self.reconstruction, before, self.state.segment_names)
                 if rec is not None and self.model is not None:
                     self.reconstruction = rec
                     tree_view.show_branch(self.server.scene, self.views, self.panels, rec,

@@ -414,3 +414,21 @@ def test_the_current_segment_is_renamed_from_the_name_field(app: ViewerApp) -> N
     assert marks.name.value == "LAD"
     assert app.undo() and app.undo() and app.undo()
     assert app.state.segment_names == [app.seeds().segments[0].name] != ["LAD"]
+
+
+def test_a_rename_after_reconstruct_reaches_the_results_and_clearing_the_marks_does_not(
+        app: ViewerApp) -> None:
+    """One segment reconstructed, then renamed: report.json names it as renamed; Clear
+    marks (whose one segment is called "Segment 1" again) leaves the results' name alone."""
+    rec = app.reconstruct()
+    assert rec is not None, app.notifications[-3:]
+    old = rec.seeds.segments[0].name
+    assert app.rename_segment("LAD") == "LAD"
+    assert json.loads(app.export("report.json"))["inputs"]["segment"] == "LAD"
+    assert app.reconstruction.seeds.segments[0].name == "LAD"
+    app.clear()
+    assert app.state.segment_names == ["Segment 1"] != [old]
+    assert json.loads(app.export("report.json"))["inputs"]["segment"] == "LAD"
+    assert app.undo()  # the marks back, and the name their undo restores: LAD
+    assert app.state.segment_names == ["LAD"]
+    assert json.loads(app.export("report.json"))["inputs"]["segment"] == "LAD"
