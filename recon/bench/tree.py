@@ -290,6 +290,11 @@ def summarise(rows: list[dict], failed: list[dict]) -> dict:
     def sd(v: np.ndarray) -> float | None:
         return float(np.std(v, ddof=1)) if len(v) > 1 else None
 
+    def lower(key: str, after: str) -> float | None:
+        """The share of cases whose ``key``_``after`` is below ``key``_before."""
+        return float(np.mean([r[f"{key}_{after}"] < r[f"{key}_before"] for r in rows])) \
+            if rows else None
+
     return {
         "suite": "tree",
         "cases": len(rows),
@@ -318,18 +323,12 @@ def summarise(rows: list[dict], failed: list[dict]) -> dict:
         "join_turn_excess_deg": {
             "median": float(np.median(turn_excess)) if len(bifs) else None,
             "max": float(np.max(turn_excess)) if len(bifs) else None},
-        "pose_better_than_header": float(np.mean(
-            [r["pose_displacement_mm_after"] < r["pose_displacement_mm_before"] for r in rows]))
-        if rows else None,
-        "pose_better_than_header_with_matched_points": float(np.mean(
-            [r["pose_displacement_mm_after_matched_points"] < r["pose_displacement_mm_before"]
-             for r in rows])) if rows else None,
-        "pose_better_than_header_scale_free": float(np.mean(
-            [r["scale_free_3d_mm_after"] < r["scale_free_3d_mm_before"] for r in rows]))
-        if rows else None,
-        "pose_better_than_header_scale_free_with_matched_points": float(np.mean(
-            [r["scale_free_3d_mm_after_matched_points"] < r["scale_free_3d_mm_before"]
-             for r in rows])) if rows else None,
+        "pose_better_than_header": lower("pose_displacement_mm", "after"),
+        "pose_better_than_header_with_matched_points":
+            lower("pose_displacement_mm", "after_matched_points"),
+        "pose_better_than_header_scale_free": lower("scale_free_3d_mm", "after"),
+        "pose_better_than_header_scale_free_with_matched_points":
+            lower("scale_free_3d_mm", "after_matched_points"),
         "scale_free_3d_median_mm": {
             key: float(np.median([r[f"scale_free_3d_mm_{key}"] for r in rows]))
             for key in ("before", "after", "after_matched_points")} if rows else None,
