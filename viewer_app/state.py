@@ -485,7 +485,9 @@ class MarkState:
         return [m for m in self.marks if m.view == view]
 
     def label(self, mark: Mark) -> str:
-        """Short label drawn next to a mark: P1, D1, W1.2 (segment 1, waypoint 2), F3."""
+        """Short label drawn next to a mark: 1p, 1d, 1w2 (segment 1: proximal end, distal
+        end, waypoint 2), F3 (landmark 3). The segment's number comes first, in lower case,
+        so that a label never reads as a vessel's name (D1, OM1, S1)."""
         if mark.kind == "feature":
             return f"F{mark.group + 1}"
         if mark.kind == "waypoint":
@@ -494,8 +496,8 @@ class MarkState:
                 for m in self.marks
                 if m.kind == "waypoint" and m.view == mark.view and m.group == mark.group
             ]
-            return f"W{mark.group + 1}.{same.index(mark.id) + 1}"
-        return f"{'P' if mark.kind == 'proximal' else 'D'}{mark.group + 1}"
+            return f"{mark.group + 1}w{same.index(mark.id) + 1}"
+        return f"{mark.group + 1}{'p' if mark.kind == 'proximal' else 'd'}"
 
     def partner(self, mark: Mark) -> Mark | None:
         """The corresponding mark in the other view (segment end or feature), if placed."""

@@ -67,7 +67,7 @@ def test_modes_build_segments_and_feature_pairs() -> None:
     st.click("a", 305, 315)
     assert len(st.to_seeds().features) == 2
     labels = {st.label(m) for m in st.marks}
-    assert {"P1", "D1", "W1.1", "W1.2", "F1", "F2"} <= labels
+    assert {"1p", "1d", "1w1", "1w2", "F1", "F2"} <= labels
 
 
 @pytest.mark.parametrize("order", ["aabb", "bbaa", "abab", "baba", "abba"])
