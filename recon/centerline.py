@@ -33,6 +33,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy import ndimage as ndi
 from scipy.interpolate import splev, splprep
 
+from recon.guide_catheter import Catheter2D, catheter_runs, find_catheters
 from recon.intensity import (
     INTENSITY_CHOICES,
     POWER_OF,
@@ -107,6 +108,8 @@ _OFF_VESSEL = 0.3
 #: ... or where its fitted radius exceeds this many times the trace's median radius
 #: while its attenuation is below _OFF_VESSEL of the median (a shallow wide shadow).
 _DIFFUSE_RADIUS = 1.6
+#: A route running along a catheter for more than this many of its radii is refused.
+_CATHETER_RUN_RADII = 4.0
 
 
 # -------------------------------------------------------------------- helpers
@@ -407,8 +410,10 @@ def trace_segment(
         except TraceError as err:
             raise TraceError(f"view {view}: click {i + 1} ({_click_role(i, k)}): {err}",
                              view=view, near_px=clicks[i]) from None
-    route = minimal_route(vmap, snapped, view=view)
+    catheters = find_catheters(vmap, img, snapped)
+    route = minimal_route(vmap, snapped, view=view, catheters=catheters)
     path_px = route.path_px
+    _refuse_catheter_runs(path_px, route.click_index, catheters, view)
 
     # Raw values on a crop around the path (profiles reach ~1.3 r + 3 px + the shift).
     coarse = _smooth_spline(path_px, _COARSE_SIGMA_PX, 1.0)
@@ -553,7 +558,28 @@ def trace_segment(
         intensity_power=float(power),
         blur_px=float(blur),
         depth=depth,
+        catheters_px=tuple(c.points_px for c in catheters),
     )
+
+
+def _refuse_catheter_runs(path_px: FloatArray, click_index: NDArray[np.int64],
+                          catheters: tuple[Catheter2D, ...], view: str) -> None:
+    """A TraceError naming the first stretch of the route ``path_px`` (N, 2) that runs
+    along a catheter for more than :data:`_CATHETER_RUN_RADII` of its radii."""
+    if not catheters:
+        return
+    min_run = _CATHETER_RUN_RADII * min(float(np.median(c.radius_px)) for c in catheters)
+    runs = catheter_runs(path_px, catheters, min_run)
+    if not runs:
+        return
+    i, j = runs[0]
+    near = path_px[(i + j) // 2]
+    leg = int(np.searchsorted(click_index, (i + j) // 2, side="right"))
+    leg = int(np.clip(leg, 1, len(click_index) - 1))
+    raise TraceError(
+        f"view {view}: the trace between click {leg} and click {leg + 1} runs along the "
+        f"guiding catheter near ({near[0]:.0f}, {near[1]:.0f}); add a waypoint on the "
+        "vessel there", view=view, near_px=near)
 
 
 def _check_trace(vmap: VesselnessMap, points: FloatArray, radius: FloatArray,

@@ -52,6 +52,7 @@ from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import cKDTree
 
+from recon.guide_catheter import Catheter2D
 from recon.route_loops import loop_apices, ring_circuits, route_distance
 from recon.trace_error import TraceError
 from recon.vesselness import RADIUS_PER_SIGMA, VesselnessMap
@@ -73,6 +74,8 @@ _TURN = 0.3
 #: a crossing a route goes straight (a loop is followed round, not cut across), and
 #: turns into a branch only where nothing straight leads on.
 _JUNCTION_TURN = 30.0
+#: Extra cost factor of moving along a guiding catheter (none across it).
+_CATHETER_ALONG = 20.0
 #: Cost per (change of log scale)^2 between a move's ends.
 _SCALE_JUMP = 10.0
 #: Move length per lumen radius, at most _MAX_MOVE_PX (the path's radius of curvature
@@ -143,7 +146,8 @@ class _Graph:
     """The (pixel, heading) graph on a band of a crop."""
 
     def __init__(self, band: NDArray[np.bool_], resp: FloatArray, log_scale: FloatArray,
-                 direction: FloatArray, move_px: int, junction: FloatArray) -> None:
+                 direction: FloatArray, move_px: int, junction: FloatArray,
+                 catheter: tuple[FloatArray, FloatArray] | None = None) -> None:
         h, w = band.shape
         self.shape = (h, w)
         self.rows, self.cols = np.nonzero(band)
@@ -165,6 +169,13 @@ class _Graph:
         across = _ACROSS * resp * cost_px / 2.0
         terms = (cost_px + across, -across * np.cos(2 * direction),
                  -across * np.sin(2 * direction))
+        if catheter is not None:
+            # along a catheter: w K c cos^2(h - psi) = w K c (1 + cos 2h cos 2psi
+            # + sin 2h sin 2psi) / 2, c = 1 on its lumen, psi its direction
+            c_w, c_dir = (m[in_box] for m in catheter)
+            along = _CATHETER_ALONG * c_w * cost_px / 2.0
+            terms = (terms[0] + along, terms[1] + along * np.cos(2 * c_dir),
+                     terms[2] + along * np.sin(2 * c_dir))
         lengths = (int(move_px),) if move_px <= 3 else (int(move_px), int(move_px) - 1)
         # Edges (p, k - dk) -> (q, k), dk in -1, 0, 1, in scipy's COO-to-CSR order (by end
         # node, fixed per heading: _edge_slots), written (slot, pixel), read transposed.
@@ -272,6 +283,45 @@ class _Graph:
         return np.asarray(chain[::-1], dtype=np.int64), node // N_HEADINGS
 
 
+def _catheter_maps(catheters: tuple[Catheter2D, ...],
+                   crop: tuple[int, int, int, int]) -> tuple[FloatArray, FloatArray]:
+    """On the crop (r0, r1, c0, c1): 1 on the lumen of a catheter (its radius + 1 px
+    round its centre line), else 0; and its direction (rad, of the (col, row) tangent)
+    at the nearest centre-line point."""
+    r0, r1, c0, c1 = crop
+    weight = np.zeros((r1 - r0, c1 - c0))
+    angle = np.zeros_like(weight)
+    for cath in catheters:
+        pts = cath.points_px - [c0, r0]
+        reach = float(cath.radius_px.max()) + 1.0
+        lo = np.maximum(np.floor(pts.min(axis=0) - reach), 0).astype(int)
+        hi = np.minimum(np.ceil(pts.max(axis=0) + reach) + 1, [c1 - c0, r1 - r0]).astype(int)
+        if np.any(hi <= lo):
+            continue
+        # the centre line every 0.5 px, painted into the box; each box pixel's nearest
+        # painted pixel by a distance transform
+        seg = np.linalg.norm(np.diff(pts, axis=0), axis=1)
+        s = np.concatenate([[0.0], np.cumsum(seg)])
+        s_fine = np.arange(0.0, s[-1] + 1e-9, 0.5)
+        fine = np.column_stack([np.interp(s_fine, s, pts[:, j]) for j in (0, 1)])
+        t = np.gradient(fine, axis=0)
+        radius = np.interp(s_fine, s, cath.radius_px)
+        ij = np.rint(fine[:, ::-1] - lo[::-1]).astype(int)
+        ok = np.all((ij >= 0) & (ij < (hi - lo)[::-1]), axis=1)
+        if not np.any(ok):
+            continue
+        label = np.full(tuple((hi - lo)[::-1]), -1)
+        label[ij[ok, 0], ij[ok, 1]] = np.flatnonzero(ok)
+        d, near = ndi.distance_transform_edt(label < 0, return_indices=True)
+        k = label[near[0], near[1]]
+        inside = d <= radius[k] + 1.0
+        psi = np.arctan2(t[k, 1], t[k, 0]) % np.pi
+        box = (slice(lo[1], hi[1]), slice(lo[0], hi[0]))
+        weight[box] = np.where(inside, 1.0, weight[box])
+        angle[box] = np.where(inside, psi, angle[box])
+    return weight, angle
+
+
 def _chord_points(a: FloatArray, b: FloatArray) -> FloatArray:
     """Points (n, 2) from a (excluded) to b (included), about 1 px apart."""
     n = max(int(np.ceil(np.hypot(*(b - a)))), 1)
@@ -280,7 +330,8 @@ def _chord_points(a: FloatArray, b: FloatArray) -> FloatArray:
 
 
 def minimal_route(
-    vmap: VesselnessMap, clicks_px: FloatArray, *, view: str = "A"
+    vmap: VesselnessMap, clicks_px: FloatArray, *, view: str = "A",
+    catheters: tuple[Catheter2D, ...] = (),
 ) -> Route:
     """Orientation-aware minimal path (module docstring) through the clicks in order.
 
@@ -289,6 +340,8 @@ def minimal_route(
     vmap : the image's vesselness (with ``direction_rad``).
     clicks_px : (K >= 2, 2) snapped clicks (col, row), on the vessel.
     view : view name used in error messages.
+    catheters : the image's catheter tubes (:func:`recon.guide_catheter.find_catheters`):
+        a move along one costs :data:`_CATHETER_ALONG` times more (crossing one does not).
 
     Raises
     ------
@@ -308,6 +361,7 @@ def minimal_route(
     junction = (np.zeros_like(resp) if vmap.junction is None
                 else ndi.grey_dilation(vmap.junction[r0:r1, c0:c1].astype(float),
                                        size=max(3, 2 * int(round(r_ref)) + 1)))
+    cath_w, cath_dir = _catheter_maps(catheters, (r0, r1, c0, c1))
     local = clicks - [c0, r0]
     rc = [(int(np.clip(np.rint(p[1]), 0, r1 - r0 - 1)), int(np.clip(np.rint(p[0]), 0, c1 - c0 - 1)))
           for p in local]
@@ -325,7 +379,8 @@ def minimal_route(
         labels, _ = ndi.label(band, structure=np.ones((3, 3)))
         keep = np.unique([labels[r, c] for r, c in rc])
         band = np.isin(labels, keep[keep > 0])  # only the pieces the clicks are on
-        graph = _Graph(band, resp, log_scale, direction, move_px, junction)
+        graph = _Graph(band, resp, log_scale, direction, move_px, junction,
+                       (cath_w, cath_dir))
         try:
             route = _route_on(graph, local, rc, move_px, (c0, r0), view, r_ref)
         except TraceError as err:

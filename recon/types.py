@@ -109,6 +109,8 @@ class Centerline2D:
     depth : (N,) the profile fit's depth: absorption per px of chord of the fitted
         circle template (:mod:`recon.profile_fit`), the densitometric signal of
         :mod:`recon.densitometry`; None when not measured.
+    catheters_px : centre lines (M_i, 2), field edge first, of the catheter tubes found
+        in the image (:mod:`recon.guide_catheter`), which the trace did not follow.
     """
 
     points_px: FloatArray
@@ -121,6 +123,7 @@ class Centerline2D:
     intensity_power: float | None = None
     blur_px: float | None = None
     depth: FloatArray | None = None
+    catheters_px: tuple[FloatArray, ...] = ()
 
     def __post_init__(self) -> None:
         n = len(self.points_px)
@@ -172,6 +175,7 @@ class Centerline2D:
             clicks_px=self.clicks_px,
             reliability=np.interp(s_new, s, np.asarray(self.reliability)[keep]),
             depth=None if self.depth is None else np.interp(s_new, s, self.depth[keep]),
+            catheters_px=self.catheters_px,
         )
 
 
