@@ -224,6 +224,12 @@ class Reconstruction:
                 "a": _intensity_report(self.centerline_a),
                 "b": _intensity_report(self.centerline_b),
             },
+            # catheter-like tubes found in each view (field edge -> tip), which the
+            # trace was kept from following
+            "guiding_catheter": {
+                "a": _catheter_report(self.centerline_a),
+                "b": _catheter_report(self.centerline_b),
+            },
             "consistency": self.consistency.to_dict() if self.consistency is not None else None,
             "optimal_view": (self.optimal_view.to_dict() if self.optimal_view is not None
                              else None),
@@ -563,6 +569,17 @@ def _uncertainty_report(intervals: MeasurementIntervals | None) -> dict | None:
         # "that view is wrong there" (its radius from the other view, a detour removed)
         "flagged_mm": intervals.flagged_mm,
     }
+
+
+def _catheter_report(cl: Centerline2D) -> list[dict]:
+    """The catheter tubes of one view: where each enters the field, its tip, its length."""
+    out = []
+    for pts in cl.catheters_px:
+        length = float(np.sum(np.linalg.norm(np.diff(pts, axis=0), axis=1)))
+        out.append({"entry_px": [round(float(v), 1) for v in pts[0]],
+                    "tip_px": [round(float(v), 1) for v in pts[-1]],
+                    "length_px": round(length, 1)})
+    return out
 
 
 def _intensity_report(cl: Centerline2D) -> dict:

@@ -52,6 +52,7 @@ __all__ = [
     "clear_results",
     "draw_marks",
     "draw_flagged",
+    "draw_catheters",
     "draw_refusal",
     "draw_reconstruction",
     "model_placement",
@@ -91,6 +92,8 @@ TRACE_COLOR = (255, 140, 0)
 MESH_COLOR = (205, 70, 70, 255)
 BACKPROJ_COLOR = (0, 255, 160)
 FLAGGED_COLOR = (255, 30, 30)  # stretches the cross-view consistency check flagged
+CATHETER_COLOR = (150, 190, 255)  # the guiding catheter found, dashed
+CATHETER_DASH_PX = 6.0  # dash and gap length along it
 
 FloatArray = NDArray[np.float64]
 
@@ -302,7 +305,7 @@ def clear_results(scene: viser.SceneApi, views: Mapping[str, View]) -> None:
         v.nodes.backproj.points = np.zeros((0, 2, 3), np.float32)
     _remove(scene, ["/model"] + [f"{overlay_name(k)}/{n}" for k in views
                                  for n in ("flagged", "flag_labels", "lesion", "lesion_labels",
-                                           "branches")])
+                                           "branches", "catheter", "catheter_label")])
     draw_refusal(scene, views, None)
 
 
@@ -430,6 +433,7 @@ def draw_reconstruction(
         v.nodes.backproj.points = polyline_segments(
             v.local_from_px(geom.project(X), z=OVERLAY_Z * 1.2)).astype(np.float32)
     draw_flagged(scene, views, rec)
+    draw_catheters(scene, views, rec)
     mesh = rec.surface.mesh.copy()
     T, model_position, centre = model_placement(np.asarray(mesh.vertices),
                                                 rec.view_a.R_view_from_world, views)
@@ -491,6 +495,35 @@ def draw_flagged(scene: viser.SceneApi, views: Mapping[str, View], rec: Reconstr
                             position=tuple(p + np.array([0.01, -0.01, 0.0])),
                             anchor="bottom-left", font_screen_scale=0.8)
     return len(flagged)
+
+
+def draw_catheters(scene: viser.SceneApi, views: Mapping[str, View], rec: Reconstruction
+                   ) -> int:
+    """The guiding catheter found in each view (recon.guide_catheter), dashed in
+    CATHETER_COLOR and labelled, so the clinician sees what the trace was kept off; a
+    tree's first branch carries them. Returns the number drawn."""
+    part = tuple(getattr(rec, "branches", (rec,)))[0]
+    drawn = 0
+    for key, cl in (("a", part.centerline_a), ("b", part.centerline_b)):
+        v = views[key]
+        dashes = []
+        for pts in cl.catheters_px:
+            s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(pts, axis=0), axis=1))])
+            s_fine = np.arange(0.0, s[-1], CATHETER_DASH_PX)
+            dense = np.column_stack([np.interp(s_fine, s, pts[:, j]) for j in (0, 1)])
+            seg = polyline_segments(v.local_from_px(dense, z=OVERLAY_Z * 0.9))
+            dashes.append(seg[::2])
+        seg = np.concatenate(dashes) if dashes else np.zeros((0, 2, 3))
+        scene.add_line_segments(f"{overlay_name(key)}/catheter", seg.astype(np.float32),
+                                CATHETER_COLOR, thickness=2.0, thickness_units="screen")
+        if cl.catheters_px:  # a quarter of the way in from the field's edge: its tip
+            pts = cl.catheters_px[0]  # lies at the ostium, among the marks' labels
+            at = v.local_from_px(pts[len(pts) // 4][None], z=OVERLAY_Z * 1.6)[0]
+            scene.add_label(f"{overlay_name(key)}/catheter_label", "catheter (not traced)",
+                            position=tuple(at + np.array([0.01, 0.0, 0.0])),
+                            anchor="center-left", font_screen_scale=0.7)
+        drawn += len(cl.catheters_px)
+    return drawn
 
 
 #: The ring round the place a refused trace names: this fraction of the image's longer

@@ -30,6 +30,7 @@ from viewer_app.scene import (
     View,
     automatic_marks,
     clear_results,
+    draw_catheters,
     draw_flagged,
     draw_lesion_marks,
     draw_reconstruction,
@@ -267,6 +268,7 @@ def draw_tree(scene: viser.SceneApi, views: Mapping[str, View], tree: TreeRecons
         v.nodes.trace.points = np.zeros((0, 2, 3), np.float32)
         v.nodes.backproj.points = np.zeros((0, 2, 3), np.float32)
     draw_flagged(scene, views, tree)
+    draw_catheters(scene, views, tree)
     parts = branches_of(tree)
     T, model_position, centre = model_placement(np.asarray(tree.tree_surface.mesh.vertices),
                                                 parts[0].view_a.R_view_from_world, views)

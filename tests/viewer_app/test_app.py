@@ -432,3 +432,32 @@ def test_a_rename_after_reconstruct_reaches_the_results_and_clearing_the_marks_d
     assert app.undo()  # the marks back, and the name their undo restores: LAD
     assert app.state.segment_names == ["LAD"]
     assert json.loads(app.export("report.json"))["inputs"]["segment"] == "LAD"
+
+
+def test_a_catheter_found_is_drawn_dashed_and_reported(app: ViewerApp) -> None:
+    """Issue 13: the guiding catheter a view's trace was kept off is drawn on that view
+    (dashed, labelled at its tip) and listed in report.json; the demo shows none."""
+    from dataclasses import replace
+
+    from viewer_app.scene import CATHETER_DASH_PX, clear_results, draw_catheters
+
+    rec = app.reconstruct()
+    assert rec is not None, app.notifications[-3:]
+    assert rec.report()["guiding_catheter"] == {"a": [], "b": []}
+    dashes = app.server.scene.get_handle_by_name("/over_b/catheter")
+    assert dashes is not None and len(dashes.points) == 0
+    rows = app.views["b"].rows
+    tube = np.column_stack([np.full(61, 100.0), np.linspace(0.0, rows / 2, 61)])
+    rec2 = replace(rec, centerline_b=replace(rec.centerline_b, catheters_px=(tube,)))
+    assert draw_catheters(app.server.scene, app.views, rec2) == 1
+    dashes = app.server.scene.get_handle_by_name("/over_b/catheter")
+    n_dashes = len(dashes.points)
+    assert n_dashes == pytest.approx(rows / 2 / CATHETER_DASH_PX / 2, abs=1)
+    ends_px = app.views["b"].px_from_local(dashes.points.reshape(-1, 3)[:, :2])
+    assert np.abs(ends_px[:, 0] - 100.0).max() < 0.5  # on the tube's centre line
+    label = app.server.scene.get_handle_by_name("/over_b/catheter_label")
+    assert label is not None
+    report = rec2.report()["guiding_catheter"]
+    assert report["a"] == [] and report["b"][0]["tip_px"] == [100.0, round(rows / 2, 1)]
+    clear_results(app.server.scene, app.views)
+    assert app.server.scene.get_handle_by_name("/over_b/catheter") is None
