@@ -67,6 +67,7 @@ from recon.centerline import (
     trace_segment,
 )
 from recon.geometry import ViewGeometry
+from recon.guide_catheter import find_catheters
 from recon.synth import PhantomTruth, make_phantom
 from recon.types import arclength
 
@@ -80,6 +81,9 @@ END_EXCLUSION_PX = 3.0
 SUCCESS_PX = 2.0
 #: Refusals a simulated clinician answers with a waypoint where the tool asks, per trace.
 ANSWER_ROUNDS = 2
+#: The phantom's catheter counts as shown in a view when this much of it (mm) projects
+#: inside the field.
+CATHETER_MIN_VISIBLE_MM = 20.0
 
 
 def _dense_truth(
@@ -296,6 +300,42 @@ def _click_errors(vmap: VesselnessMap, clicks_px: np.ndarray, seg_px: np.ndarray
             "snap_error_px": d_snap.tolist()}
 
 
+def _catheter_row(image: np.ndarray, vmap: VesselnessMap, view: ViewGeometry,
+                  clicks_px: np.ndarray, case) -> dict:
+    """The catheter tubes found in one view (:func:`find_catheters`, given the clicks)
+    against the phantom's guiding catheter: ``catheter_in_view`` (one is rendered and
+    at least :data:`CATHETER_MIN_VISIBLE_MM` of it projects inside the field),
+    ``catheter_hit`` (a tube found with at least 80 % of its points on the projected
+    catheter: within its outer radius + 3 px), ``catheter_false`` (tubes found with
+    under half of their points on it)."""
+    tubes = find_catheters(vmap, image, clicks_px)
+    truth = np.zeros((0, 2))
+    visible = False
+    if case.catheter is not None:
+        projected = view.project(case.catheter.X_world)
+        inside = vmap.valid[np.clip(np.rint(projected[:, 1]).astype(int), 0, view.rows - 1),
+                            np.clip(np.rint(projected[:, 0]).astype(int), 0, view.cols - 1)]
+        inside &= np.all((projected >= 0) & (projected < [view.cols, view.rows]), axis=1)
+        truth = projected[inside]
+        visible = 0.1 * len(truth) >= CATHETER_MIN_VISIBLE_MM  # X_world every 0.1 mm
+    reach_px = (3.0 + (case.catheter.outer_radius_mm / vmap.pixel_mm
+                       if case.catheter is not None and vmap.pixel_mm else 0.0))
+    on = [float(np.mean(cKDTree(truth).query(t.points_px)[0] <= reach_px)) if len(truth)
+          else 0.0 for t in tubes]
+    return {"catheter_in_view": bool(visible),
+            "catheter_hit": bool(any(f >= 0.8 for f in on)),
+            "catheter_false": int(sum(f < 0.5 for f in on))}
+
+
+def _catheter_figures(rows: list[dict]) -> dict:
+    """Share of views with a visible catheter where it was found, and false tubes per view."""
+    shown = [r["catheter_hit"] for r in rows if r.get("catheter_in_view")]
+    return {"catheter_found": float(np.mean(shown)) if shown else float("nan"),
+            "catheter_views": len(shown),
+            "catheter_false_per_view": float(np.mean([r.get("catheter_false", 0) for r in rows]))
+            if rows else float("nan")}
+
+
 def _varied_case_rows(spec) -> list[dict]:
     """Both views' rows of one varied-suite case (module level: runs in a worker)."""
     from recon.synth.suites import make_suite_case
@@ -316,6 +356,7 @@ def _varied_case_rows(spec) -> list[dict]:
         seg, _ = _dense_truth(view, case.truth.segment_X_world, case.truth.segment_radius_mm,
                               0.1)
         base.update(_click_errors(vmap, np.asarray(clicks, float), seg))
+        base.update(_catheter_row(image, vmap, view, np.asarray(clicks, float), case))
         try:
             row = _evaluate_varied_view(image, view, clicks, case, name, vmap)
         except ValueError as err:  # TraceError (a CoronaryError) included: a failure
@@ -382,6 +423,7 @@ def _figures(rows: list[dict]) -> dict:
         "trace_ms": median(r["trace_ms"] for r in done),
         **_click_figures(rows, "click_error_px"),
         **_click_figures(rows, "snap_error_px"),
+        **_catheter_figures(rows),
     }
 
 
@@ -452,6 +494,9 @@ def _format_varied(result: dict) -> str:
         f"clicked {o['click_error_px_median']:.2f} / {o['click_error_px_p90']:.2f} / "
         f"{o[f'click_error_px_{k}']:.3f}; snapped {o['snap_error_px_median']:.2f} / "
         f"{o['snap_error_px_p90']:.2f} / {o[f'snap_error_px_{k}']:.3f}")
+    lines.append(
+        f"guiding catheter: found in {o['catheter_found']:.2f} of the {o['catheter_views']} "
+        f"views that show one; false tubes per view {o['catheter_false_per_view']:.3f}")
     for r in result["failures"]:
         what = r.get("error") or (f"lost {r['lost_px']:.0f} px of the truth "
                                   f"(max gap {r['truth_max_gap_px']:.1f} px)")
