@@ -330,7 +330,7 @@ def _catheter_row(image: np.ndarray, vmap: VesselnessMap, view: ViewGeometry,
 def _catheter_figures(rows: list[dict]) -> dict:
     """Share of views with a visible catheter where it was found, and false tubes per view."""
     shown = [r["catheter_hit"] for r in rows if r.get("catheter_in_view")]
-    return {"catheter_found": float(np.mean(shown)) if shown else float("nan"),
+    return {"catheter_found": float(np.mean(shown)) if shown else None,  # none shown
             "catheter_views": len(shown),
             "catheter_false_per_view": float(np.mean([r.get("catheter_false", 0) for r in rows]))
             if rows else float("nan")}
@@ -494,8 +494,9 @@ def _format_varied(result: dict) -> str:
         f"clicked {o['click_error_px_median']:.2f} / {o['click_error_px_p90']:.2f} / "
         f"{o[f'click_error_px_{k}']:.3f}; snapped {o['snap_error_px_median']:.2f} / "
         f"{o['snap_error_px_p90']:.2f} / {o[f'snap_error_px_{k}']:.3f}")
+    found = "n/a" if o["catheter_found"] is None else f"{o['catheter_found']:.2f}"
     lines.append(
-        f"guiding catheter: found in {o['catheter_found']:.2f} of the {o['catheter_views']} "
+        f"guiding catheter: found in {found} of the {o['catheter_views']} "
         f"views that show one; false tubes per view {o['catheter_false_per_view']:.3f}")
     for r in result["failures"]:
         what = r.get("error") or (f"lost {r['lost_px']:.0f} px of the truth "
