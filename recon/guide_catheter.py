@@ -254,6 +254,17 @@ def _dips(image: NDArray, points_px: FloatArray, tangents: FloatArray,
     return np.minimum(left, right) - centre, np.abs(left - right)
 
 
+def _is_tube(dip: FloatArray, asym: FloatArray, ref_dip: float, min_fraction: float) -> bool:
+    """Whether a stretch's dips and side differences (:func:`_dips`) are a tube's: dark
+    on the centre at ``min_fraction`` of its points, a median dip of at least
+    :data:`MIN_CONTRAST` of ``ref_dip`` (and above 0), sides within
+    :data:`MAX_ASYMMETRY` of it."""
+    depth = float(np.median(dip))
+    return bool(np.mean(dip > 0) >= min_fraction and depth > 0
+                and depth >= MIN_CONTRAST * ref_dip
+                and np.median(asym) <= MAX_ASYMMETRY * depth)
+
+
 def _tangents(points_px: FloatArray) -> FloatArray:
     t = np.gradient(points_px, axis=0)
     return t / np.maximum(np.linalg.norm(t, axis=1, keepdims=True), 1e-9)
@@ -301,12 +312,17 @@ def find_catheters(vmap: VesselnessMap, image: ArrayLike,
         if len(clicks) and np.any(np.linalg.norm(clicks - start, axis=1) - click_r
                                   < CLICK_CLEARANCE * vmap.radius_px_at(start)[0] + click_r):
             continue  # the clicked vessel itself reaches the field's edge here
+        # a first look at the start (5 points over 4 radii): most steps and rims fail here
+        r_s = float(vmap.radius_px_at(start)[0])
+        d_s = _heading(vmap, start)
+        near = start + np.outer(np.linspace(-2.0, 2.0, 5) * r_s, d_s)
+        if not _is_tube(*_dips(img, near, np.tile(d_s, (5, 1)), np.full(5, r_s)), ref_dip,
+                        0.0):
+            continue
         pts, rad, left_field = _track(vmap, ridge, start, clicks, click_r, bend_px)
         if len(pts) < 3 or left_field:
             continue  # a catheter ends inside the field, at its tip
-        dip, asym = _dips(img, pts, _tangents(pts), rad)
-        if (np.mean(dip > 0) < MIN_DIP_FRACTION or np.median(dip) < MIN_CONTRAST * ref_dip
-                or np.median(asym) > MAX_ASYMMETRY * np.median(dip)):
+        if not _is_tube(*_dips(img, pts, _tangents(pts), rad), ref_dip, MIN_DIP_FRACTION):
             continue
         if any(_shared(pts, c) > 0.5 for c in found):
             continue  # the same tube, entered elsewhere
