@@ -64,6 +64,8 @@ __all__ = [
     "direction_away",
     "bifurcation_angles_deg",
     "bifurcation_qca",
+    "fill_names",
+    "literal",
     "QCA_SEGMENT_MM",
     "DIRECTION_WINDOW_MM",
     "MEDINA_DS_PCT",
@@ -246,7 +248,8 @@ class BifurcationQCA:
     ``side_branch`` : on the branch (arc length of the branch);
     ``medina`` : "p,d,s" each 1 (%DS >= 50) or 0;
     ``origin_warning`` : why the branch's origin is implausible (module docstring),
-    or None.
+    or None; ``origin_form`` : the same with ``{parent}`` and ``{branch}`` in place of
+    the names (:meth:`renamed` fills them again; not reported).
     """
 
     name: str
@@ -263,9 +266,21 @@ class BifurcationQCA:
     proximal_angle_deg: float
     medina: str
     origin_warning: str | None = None
+    origin_form: str | None = None
 
     def to_dict(self) -> dict:
-        return asdict(self)
+        out = asdict(self)
+        del out["origin_form"]
+        return out
+
+    def renamed(self, old: str, new: str) -> BifurcationQCA:
+        """This bifurcation with the segment ``old`` called ``new`` (as its parent or its
+        branch), its origin warning included."""
+        parent = new if self.parent == old else self.parent
+        branch = new if self.branch == old else self.branch
+        warning = (fill_names(self.origin_form, parent, branch) if self.origin_form is not None
+                   else self.origin_warning)
+        return replace(self, parent=parent, branch=branch, origin_warning=warning)
 
 
 def _segment_qca(s_mm: FloatArray, diameter_mm: FloatArray, reference_mm: FloatArray,
@@ -315,6 +330,7 @@ def bifurcation_qca(
     medina = ",".join(str(int(q.diameter_stenosis_pct >= MEDINA_DS_PCT))
                       for q in (proximal, distal, side))
     J, _, _ = nearest_on_polyline(parent_X, branch_X[0])
+    form = _origin_form(name, s_c, r_j, bif)
     return BifurcationQCA(
         name=name,
         parent=parent,
@@ -329,7 +345,8 @@ def bifurcation_qca(
         bifurcation_angle_deg=bif,
         proximal_angle_deg=prox,
         medina=medina,
-        origin_warning=origin_warning(name, parent, branch, s_c, r_j, bif),
+        origin_warning=fill_names(form, parent, branch),
+        origin_form=form,
     )
 
 
@@ -337,10 +354,26 @@ def origin_warning(name: str, parent: str, branch: str, carina_mm: float, r_j_mm
                    angle_deg: float) -> str | None:
     """One line when the carina lies farther along the branch (``carina_mm``) than
     :data:`ORIGIN_CARINA_FACTOR` times r_J / sin(angle) (module docstring), else None."""
+    return fill_names(_origin_form(name, carina_mm, r_j_mm, angle_deg), parent, branch)
+
+
+def _origin_form(name: str, carina_mm: float, r_j_mm: float, angle_deg: float) -> str | None:
+    """:func:`origin_warning` with ``{parent}`` and ``{branch}`` left to fill."""
     expected_mm = r_j_mm / max(float(np.sin(np.radians(angle_deg))), np.sin(np.radians(5.0)))
     if carina_mm <= ORIGIN_CARINA_FACTOR * expected_mm:
         return None
-    return (f"{name}: {branch} stays {carina_mm:.1f} mm inside {parent}'s lumen, where a "
-            f"branch at {angle_deg:.0f} deg leaves within about {expected_mm:.1f} mm: its trace "
-            f"in one view likely follows {parent} first (a faint ostium skipped), so its angle "
-            f"and ostium are uncertain; add a waypoint on {branch} just past its origin")
+    return (f"{literal(name)}: {{branch}} stays {carina_mm:.1f} mm inside {{parent}}'s lumen, "
+            f"where a branch at {angle_deg:.0f} deg leaves within about {expected_mm:.1f} mm: "
+            "its trace in one view likely follows {parent} first (a faint ostium skipped), so "
+            "its angle and ostium are uncertain; add a waypoint on {branch} just past its "
+            "origin")
+
+
+def literal(text: str) -> str:
+    """``text`` as the literal part of a :meth:`str.format` form (its braces doubled)."""
+    return text.replace("{", "{{").replace("}", "}}")
+
+
+def fill_names(form: str | None, parent: str, branch: str) -> str | None:
+    """A warning's form with the parent's and the branch's names put in (None stays None)."""
+    return None if form is None else form.format(parent=parent, branch=branch)

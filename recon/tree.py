@@ -24,7 +24,14 @@ from dataclasses import dataclass, replace
 import numpy as np
 import trimesh
 
-from recon.bifurcation import BifurcationQCA, Junction, bifurcation_qca, carina_s_mm
+from recon.bifurcation import (
+    BifurcationQCA,
+    Junction,
+    bifurcation_qca,
+    carina_s_mm,
+    fill_names,
+    literal,
+)
 from recon.calibration import CalibrationResult, refine_with_matches
 from recon.centerline import VesselnessMap, compute_vesselness
 from recon.errors import CoronaryError
@@ -344,11 +351,15 @@ class OriginMismatch:
 
     def warning(self, bifurcation: str, branch: str, parent: str) -> str:
         """The one-line warning of the bifurcation (its ``origin_warning``)."""
+        return fill_names(self.form(bifurcation), parent, branch)
+
+    def form(self, bifurcation: str) -> str:
+        """:meth:`warning` with ``{parent}`` and ``{branch}`` left to fill."""
         other = "B" if self.view == "A" else "A"
-        return (f"{bifurcation}: in view {self.view} the trace of {branch} runs "
-                f"{self.along_px:.0f} px along {parent} and leaves it where view {other}'s "
-                f"trace of {branch} has no match ({self.miss_px:.1f} px off its epipolar "
-                f"line), so its angle and ostium are uncertain; add a waypoint on {branch} "
+        return (f"{literal(bifurcation)}: in view {self.view} the trace of {{branch}} runs "
+                f"{self.along_px:.0f} px along {{parent}} and leaves it where view {other}'s "
+                f"trace of {{branch}} has no match ({self.miss_px:.1f} px off its epipolar "
+                f"line), so its angle and ostium are uncertain; add a waypoint on {{branch}} "
                 f"just past its origin in view {self.view}")
 
 
@@ -358,9 +369,13 @@ class OriginUnseen:
 
     def warning(self, bifurcation: str, branch: str, parent: str) -> str:
         """The one-line warning of the bifurcation (its ``origin_warning``)."""
-        return (f"{bifurcation}: {branch} does not part from {parent}'s shadow in either "
-                f"view, so where it leaves {parent}, its angle and its ostium are uncertain; "
-                f"a view in which the two vessels part would settle them")
+        return fill_names(self.form(bifurcation), parent, branch)
+
+    def form(self, bifurcation: str) -> str:
+        """:meth:`warning` with ``{parent}`` and ``{branch}`` left to fill."""
+        return (f"{literal(bifurcation)}: {{branch}} does not part from {{parent}}'s shadow "
+                "in either view, so where it leaves {parent}, its angle and its ostium are "
+                "uncertain; a view in which the two vessels part would settle them")
 
 
 def _origin_from_the_clear_view(pair: tuple[Centerline2D, Centerline2D],
@@ -511,7 +526,8 @@ def _bifurcation(seeds: Seeds, branches: list[Reconstruction], k: int,
     )
     if mismatch is not None and qca.origin_warning is None:
         qca = replace(qca, origin_warning=mismatch.warning(seg.bifurcation, seg.name,
-                                                           seg.parent))
+                                                           seg.parent),
+                      origin_form=mismatch.form(seg.bifurcation))
     return qca
 
 

@@ -178,9 +178,7 @@ def renamed(result: Result, before: list[str], after: list[str]) -> Result | Non
         return replace(result, seeds=seeds)
     return replace(result, seeds=seeds,
                    branches=tuple(replace(b, seeds=seeds) for b in result.branches),
-                   bifurcations=tuple(replace(q, parent=new if q.parent == old else q.parent,
-                                              branch=new if q.branch == old else q.branch)
-                                      for q in result.bifurcations))
+                   bifurcations=tuple(q.renamed(old, new) for q in result.bifurcations))
 
 
 def branch_heading(result: Result, shown: int) -> str:

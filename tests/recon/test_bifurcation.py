@@ -107,7 +107,17 @@ def test_a_branch_that_stays_inside_its_parent_long_before_a_steep_turn_is_flagg
     assert q.origin_warning is not None and q.origin_warning.startswith("b1: D1 stays")
     assert "add a waypoint on D1 just past its origin" in q.origin_warning
     assert q.to_dict()["origin_warning"] == q.origin_warning
+    assert "origin_form" not in q.to_dict()
     assert origin_warning("b1", "LAD", "D1", 6.0, 1.5, 15.0) is None
+    # a renamed segment is renamed in the warning too, and only where it is named
+    diag = q.renamed("D1", "Diag {1}")
+    assert (diag.branch, diag.parent) == ("Diag {1}", "LAD")
+    assert diag.origin_warning == q.origin_warning.replace("D1", "Diag {1}")
+    main = diag.renamed("LAD", "a")  # a name that is also a word of the sentence
+    assert main.parent == "a" and main.origin_warning.count("a's lumen") == 1
+    assert main.origin_warning.replace("inside a's", "inside LAD's").replace(
+        "follows a first", "follows LAD first") == diag.origin_warning
+    assert q.renamed("LCx", "OM1") == q
 
 
 def test_sharpest_turn_is_the_corner_of_a_polyline_and_the_chord_angle_of_an_arc():

@@ -310,6 +310,8 @@ def test_a_branch_origin_traced_along_its_parent_is_redrawn_from_the_clear_view(
     line = mismatch.warning("bif 1", "D1", "LAD")
     assert line.startswith("bif 1: in view B the trace of D1 runs ")
     assert line.endswith("add a waypoint on D1 just past its origin in view B")
+    assert mismatch.form("bif {1}").format(parent="LAD", branch="D1") == line.replace(
+        "bif 1", "bif {1}")
 
     # both views' traces stay on the parent's centre line: the origin is seen in neither
     from recon.tree import OriginUnseen
