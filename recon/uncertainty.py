@@ -320,6 +320,9 @@ _RADIUS_CORRELATION_MAX_MM = 5.0
 # absolute error of 0.14 px against the phantom's truth (docs/benchmarks.md); the two
 # views' disagreement cannot show it
 COMMON_RADIUS_SD_PX = 0.15
+#: The stretch (mm of 3D arc length) at each end over which a trace's px are turned
+#: into mm of the segment's length (:func:`_end_draws`).
+END_STRETCH_MM = 2.0
 _RADIUS_LOCAL_WINDOW_MM = 5.0
 
 
@@ -464,6 +467,9 @@ def measurement_intervals(
     Each flagged stretch also loses the local radius model's
     averaging (the disagreement there is evidence, not noise).
 
+    The segment length's draws also carry where its ends were clicked
+    (:func:`_end_draws`): the reported curve's own arc length is otherwise held.
+
     ``measure_from_s_mm``: measure each draw, as ``measurements`` were measured, only
     from this arc length of ``centerline`` on (a branch's QCA from its carina on,
     :mod:`recon.tree`); the radius intervals still cover every point.
@@ -542,6 +548,10 @@ def measurement_intervals(
         for key, v in m.to_dict().items():
             if key != "has_lesion":
                 values.setdefault(key, []).append(float(v))
+    if "segment_length_mm" in values:
+        values["segment_length_mm"] = list(np.asarray(values["segment_length_mm"]) + _end_draws(
+            rng, X0, s0, (pa, pb), posterior.click_sigma_px, n_samples,
+            both_ends=measure_from_s_mm is None))
     radii = np.sqrt(areas[:-1] / np.pi)
     nominal = measurements.to_dict()
     ci = {}
@@ -567,6 +577,33 @@ def measurement_intervals(
         },
         flagged_mm=[[[float(s0[i]), float(s0[j - 1])] for i, j in f] for f in flags],
     )
+
+
+def _end_draws(rng: np.random.Generator, X: FloatArray, s_mm: FloatArray,
+               projected: tuple[FloatArray, FloatArray], sigma_px: float, n: int,
+               both_ends: bool = True) -> FloatArray:
+    """(n,) draws of the segment length's change (mm) from where its ends were clicked.
+
+    Each view's trace ends at a click, and a click's error along the vessel
+    (``sigma_px``, the click noise estimated from the residuals) moves that end along
+    it. Triangulation splits the two views' disagreement, so an end moves in 3D by the
+    mean of the two views' shifts, each times that view's mm of 3D arc length per px
+    of trace at the end (over its last :data:`END_STRETCH_MM`; foreshortening makes it
+    larger). ``both_ends`` False: only the distal end was clicked (a branch measured
+    from its carina)."""
+    total = np.zeros(n)
+    for end in ((0, -1) if both_ends else (-1,)):
+        near = (s_mm <= s_mm[0] + END_STRETCH_MM) if end == 0 else \
+            (s_mm >= s_mm[-1] - END_STRETCH_MM)
+        idx = np.flatnonzero(near)
+        if len(idx) < 2:
+            continue
+        s3 = float(s_mm[idx[-1]] - s_mm[idx[0]])
+        per_px = [s3 / max(float(np.sum(np.linalg.norm(np.diff(p[idx], axis=0), axis=1))),
+                           1e-6) for p in projected]
+        shifts = rng.normal(0.0, sigma_px, (n, 2)) * np.asarray(per_px)[None, :]
+        total += shifts.mean(axis=1) * (1.0 if end == -1 else -1.0)
+    return total
 
 
 def _flag_runs(flagged: NDArray[np.bool_] | None, m: int) -> list[tuple[int, int]]:

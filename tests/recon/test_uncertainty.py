@@ -125,3 +125,23 @@ def test_unknown_correction_is_refused():
     pb = VIEW_B.project(heart_points(4))
     with pytest.raises(CalibrationError, match="unknown correction"):
         calibrate_supported(VIEW_A, VIEW_B, pa, pb, candidates=("rotation",))
+
+
+def test_the_clicked_ends_spread_the_segment_length_as_the_click_noise_says() -> None:
+    """A straight 3D segment seen at 4 px per mm in view A and, foreshortened, at 2 px per
+    mm in view B: each end moves by the mean of the two views' along-vessel click errors
+    (sigma 1 px) times their mm per px, so the length's sd is
+    sqrt(2) * sqrt(0.25^2 + 0.5^2) / 2 = 0.395 mm with both ends clicked, 0.280 mm with the
+    distal one only."""
+    from recon.uncertainty import _end_draws
+
+    s = np.linspace(0.0, 30.0, 301)
+    X = np.column_stack([s, np.zeros_like(s), np.zeros_like(s)])
+    pa, pb = X[:, :2] * 4.0, X[:, :2] * 2.0
+    rng = np.random.default_rng(0)
+    both = _end_draws(rng, X, s, (pa, pb), 1.0, 20000)
+    distal = _end_draws(rng, X, s, (pa, pb), 1.0, 20000, both_ends=False)
+    assert np.std(both) == pytest.approx(np.sqrt(2) * np.hypot(0.25, 0.5) / 2, rel=0.03)
+    assert np.std(distal) == pytest.approx(np.hypot(0.25, 0.5) / 2, rel=0.03)
+    assert abs(np.mean(both)) < 0.01
+    assert np.all(_end_draws(rng, X, s, (pa, pb), 0.0, 10) == 0.0)
