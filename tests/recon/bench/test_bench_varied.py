@@ -38,6 +38,12 @@ def test_bench_centerline_varied_keys(tiny_suite):
     json.dumps(result, default=float)
     assert result["suite"] == "varied" and set(result["chains"]) == {"sharp-display",
                                                                     "glare-8bit"}
+    # the phantom's guiding catheter (glare-8bit renders one, sharp-display none); in the
+    # glare case (a loop, seed 300) it is found in one view of two
+    glare, sharp = result["chains"]["glare-8bit"], result["chains"]["sharp-display"]
+    assert glare["catheter_views"] == 2 and glare["catheter_found"] == 0.5
+    assert sharp["catheter_views"] == 0 and sharp["catheter_found"] is None
+    assert glare["catheter_false_per_view"] == 0 == sharp["catheter_false_per_view"]
     for figures in [*result["chains"].values(), result["overall"]]:
         assert CHAIN_KEYS <= set(figures)
     assert result["overall"]["traces"] == 4 and len(result["rows"]) == 4
@@ -117,11 +123,6 @@ def test_bench_reconstruct_varied_keys_and_stability(tiny_suite):
     for figures in [*result["chains"].values(), result["overall"]]:
         assert RECON_KEYS <= set(figures)
     assert result["overall"]["cases"] == 2
-    # the phantom's guiding catheter (glare-8bit renders one, sharp-display none)
-    glare, sharp = result["chains"]["glare-8bit"], result["chains"]["sharp-display"]
-    assert glare["catheter_views"] == 2 and glare["catheter_found"] == 1.0
-    assert sharp["catheter_views"] == 0 and sharp["catheter_found"] is None
-    assert glare["catheter_false_per_view"] == 0 == sharp["catheter_false_per_view"]
     st = result["stability"]
     assert st["jitter_px"] == 2.0 and len(st["cases"]) == 2
     for key in ("stable_fraction", "mld_spread_mm_median", "ds_spread_pct_median",
