@@ -90,7 +90,7 @@ MIN_DIP_FRACTION = 0.8
 MIN_CONTRAST = 0.5
 #: Start pixels lie 1-3 times this distance (px) inside the field's edge.
 EDGE_PX = 6
-#: At most this many start places are followed (the strongest).
+#: At most this many start places are followed (the largest pieces of ridge first).
 MAX_STARTS = 48
 #: A track ends this many of its radii (plus the click's lumen) before a click.
 CLICK_CLEARANCE = 2.0
