@@ -295,3 +295,10 @@ def test_the_report_carries_the_warnings_and_the_consistency(reconstructions) ->
     assert max(consistency["max_offset_px"].values()) < 3.0
     ratios = [iv["ratio"] for v in ("a", "b") for iv in consistency["arc_length_ratio"][v]]
     assert ratios and all(abs(r - 1.0) < 0.05 for r in ratios)
+
+
+def test_no_catheter_is_found_in_the_static_phantom_which_has_none(reconstructions) -> None:
+    """The static phantom's tubes do not enter the field as a guiding catheter would: no
+    view of any pair reports one (no false catheter on real images)."""
+    for rec in reconstructions.values():
+        assert rec.report()["guiding_catheter"] == {"a": [], "b": []}
