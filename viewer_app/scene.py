@@ -57,6 +57,8 @@ __all__ = [
     "draw_reconstruction",
     "model_placement",
     "label_places",
+    "label_box",
+    "MARK_LABEL_WIDTH",
     "diameter_colors",
     "lesion_points",
     "automatic_marks",
@@ -263,12 +265,42 @@ LABEL_PLACES = ((np.array([0.008, 0.008, 0.0]), "top-left"),
                 (np.array([-0.008, 0.0, 0.0]), "center-right"))
 
 
+#: A label's size on the page in scene units (an image is 1 wide): a mark's label (a few
+#: characters) and the height of every label, as measured on the browser tests'
+#: screenshots.
+MARK_LABEL_WIDTH, LABEL_HEIGHT = 0.045, 0.03
+
+
+def label_box(at: FloatArray, anchor: str, width: float) -> FloatArray:
+    """The box (x0, x1, y0, y1) of a label of ``width`` placed at ``at`` (2,) by its
+    ``anchor`` (viser's "top-left", ..., "center-right"; y grows downwards)."""
+    vertical, horizontal = anchor.split("-")
+    x0 = at[0] - (width if horizontal == "right" else 0.0)
+    y0 = at[1] - {"top": 0.0, "center": LABEL_HEIGHT / 2, "bottom": LABEL_HEIGHT}[vertical]
+    return np.array([x0, x0 + width, y0, y0 + LABEL_HEIGHT])
+
+
 def label_places(pts: FloatArray) -> list[tuple[FloatArray, str]]:
-    """Where the label of each mark at ``pts`` (M, 3) goes (:data:`LABEL_PLACES`): a mark
-    on the same spot as an earlier one (a branch's start on its bifurcation landmark) on
-    another side of it, so that the two labels do not draw over each other."""
-    same = np.linalg.norm(pts[:, None, :2] - pts[None, :, :2], axis=2) < 1e-4
-    return [LABEL_PLACES[min(int(j), 2)] for j in np.tril(same, -1).sum(axis=1)]
+    """Where the label of each mark at ``pts`` (M, 3) goes (:data:`LABEL_PLACES`), in
+    order: the first place whose label clears the labels placed before it (two waypoints
+    a few pixels apart, a branch's start on its bifurcation landmark), else the one that
+    overlaps them least."""
+    placed: list[FloatArray] = []
+    out = []
+    for p in np.asarray(pts, dtype=float).reshape(-1, 3):
+        overlaps = []
+        for offset, anchor in LABEL_PLACES:
+            box = label_box(p[:2] + offset[:2], anchor, MARK_LABEL_WIDTH)
+            area = sum(max(0.0, min(box[1], b[1]) - max(box[0], b[0]))
+                       * max(0.0, min(box[3], b[3]) - max(box[2], b[2])) for b in placed)
+            overlaps.append(area)
+            if area == 0.0:
+                break
+        k = int(np.argmin(overlaps))
+        offset, anchor = LABEL_PLACES[k]
+        placed.append(label_box(p[:2] + offset[:2], anchor, MARK_LABEL_WIDTH))
+        out.append(LABEL_PLACES[k])
+    return out
 
 
 def draw_marks(scene: viser.SceneApi, views: Mapping[str, View], st: MarkState) -> None:

@@ -24,6 +24,7 @@ import viser
 from numpy.typing import NDArray
 
 from viewer_app.scene import (
+    MARK_LABEL_WIDTH,
     MODEL_SIZE,
     OVERLAY_Z,
     ModelNodes,
@@ -35,6 +36,7 @@ from viewer_app.scene import (
     draw_lesion_marks,
     draw_reconstruction,
     draw_refusal,
+    label_box,
     label_places,
     model_placement,
     overlay_name,
@@ -87,10 +89,9 @@ THIN_PX, THICK_PX, SHOWN_PX = 1.2, 2.5, 4.5  # trace, back-projection, the shown
 #: anchor), above right first (the end mark's own label is below right).
 NAME_PLACES = ((np.array([0.01, -0.01]), "bottom-left"), (np.array([-0.01, -0.01]), "bottom-right"),
                (np.array([-0.01, 0.01]), "top-right"), (np.array([0.01, 0.01]), "top-left"))
-#: A label's size on the page in scene units (an image is 1 wide): per character of a
-#: branch's name, a mark's label (a few characters) and the height of both, and a mark's
-#: dot's radius, as measured on the browser tests' screenshots.
-NAME_CHAR, MARK_LABEL_WIDTH, LABEL_HEIGHT, DOT_RADIUS = 0.012, 0.045, 0.03, 0.008
+#: Per character of a branch's name on the page, in scene units (an image is 1 wide), and
+#: a mark's dot's radius, as measured on the browser tests' screenshots.
+NAME_CHAR, DOT_RADIUS = 0.012, 0.008
 
 
 def branch_color(k: int) -> tuple[int, int, int]:
@@ -221,15 +222,6 @@ def show_branch(scene: viser.SceneApi, views: Mapping[str, View], panels: Panels
     panels.show_tree(result, index)
 
 
-def _label_box(at: NDArray[np.float64], anchor: str, width: float) -> NDArray[np.float64]:
-    """The box (x0, x1, y0, y1) of a label of ``width`` placed at ``at`` (2,) by its
-    ``anchor`` (viser's "top-left", ..., "center-right"; y grows downwards)."""
-    vertical, horizontal = anchor.split("-")
-    x0 = at[0] - (width if horizontal == "right" else 0.0)
-    y0 = at[1] - {"top": 0.0, "center": LABEL_HEIGHT / 2, "bottom": LABEL_HEIGHT}[vertical]
-    return np.array([x0, x0 + width, y0, y0 + LABEL_HEIGHT])
-
-
 def name_place(end_xy: NDArray[np.float64], name: str, marks_xyz: NDArray
                ) -> tuple[NDArray[np.float64], str]:
     """Where a branch's name goes beside its distal end ``end_xy`` (2,) on an image whose
@@ -240,12 +232,12 @@ def name_place(end_xy: NDArray[np.float64], name: str, marks_xyz: NDArray
     marks = np.asarray(marks_xyz, dtype=float).reshape(-1, 3)
     boxes = [np.array([x - DOT_RADIUS, x + DOT_RADIUS, y - DOT_RADIUS, y + DOT_RADIUS])
              for x, y in marks[:, :2]]
-    boxes += [_label_box(p[:2] + offset[:2], anchor, MARK_LABEL_WIDTH)
+    boxes += [label_box(p[:2] + offset[:2], anchor, MARK_LABEL_WIDTH)
               for p, (offset, anchor) in zip(marks, label_places(marks), strict=True)]
     taken = np.array(boxes).reshape(-1, 4)
     hits = []
     for offset, anchor in NAME_PLACES:
-        x0, x1, y0, y1 = _label_box(end_xy + offset, anchor, NAME_CHAR * len(name))
+        x0, x1, y0, y1 = label_box(end_xy + offset, anchor, NAME_CHAR * len(name))
         hits.append(int(np.count_nonzero((taken[:, 1] > x0) & (taken[:, 0] < x1)
                                          & (taken[:, 3] > y0) & (taken[:, 2] < y1))))
     offset, anchor = NAME_PLACES[int(np.argmin(hits))]

@@ -229,3 +229,24 @@ def test_a_segment_renamed_after_reconstruct_is_renamed_in_the_results(
     assert f"LAD › {names[1]}" in results.bifurcations.content
     report = json.loads(app.export("report.json"))
     assert [b["parent"] for b in report["branches"]] == [None, "LAD", "LAD"]
+
+
+def test_the_labels_of_marks_a_few_pixels_apart_do_not_cover_each_other() -> None:
+    """Two waypoints 5 px apart (about 0.01 scene units) once drew their labels "1w1" and
+    "1w2" over each other: the second label goes where it clears the first; a mark far
+    away keeps the first place; three marks on one spot use all three places."""
+    from viewer_app.scene import LABEL_PLACES, MARK_LABEL_WIDTH, label_box, label_places
+
+    pts = np.array([[0.0, 0.0, 0.0], [0.01, 0.004, 0.0], [0.4, 0.3, 0.0],
+                    [0.4, 0.3, 0.0], [0.4, 0.3, 0.0]])
+    places = label_places(pts)
+    boxes = [label_box(p[:2] + off[:2], anchor, MARK_LABEL_WIDTH)
+             for p, (off, anchor) in zip(pts, places, strict=True)]
+
+    def overlap(a, b) -> bool:
+        return a[1] > b[0] and b[1] > a[0] and a[3] > b[2] and b[3] > a[2]
+
+    assert places[0][1] == LABEL_PLACES[0][1] and places[2][1] == LABEL_PLACES[0][1]
+    assert not overlap(boxes[0], boxes[1])
+    assert [a for _, a in places[2:]] == [a for _, a in LABEL_PLACES]
+    assert not any(overlap(boxes[i], boxes[j]) for i in (2, 3, 4) for j in (2, 3, 4) if i < j)
