@@ -41,7 +41,9 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import ndimage as ndi
+from scipy.spatial import cKDTree
 
+from recon.types import arclength
 from recon.vesselness import RADIUS_PER_SIGMA, VesselnessMap
 
 __all__ = ["Catheter2D", "find_catheters", "catheter_runs", "MIN_LENGTH_MM", "RADIUS_RANGE_MM"]
@@ -110,7 +112,7 @@ class Catheter2D:
 
     @property
     def length_px(self) -> float:
-        return float(np.sum(np.linalg.norm(np.diff(self.points_px, axis=0), axis=1)))
+        return float(arclength(self.points_px)[-1])
 
     @property
     def tip_px(self) -> FloatArray:
@@ -174,13 +176,13 @@ def _track(vmap: VesselnessMap, ridge: NDArray, start: FloatArray, clicks_px: Fl
     """Follow the tube from ``start`` (2,) inwards, bending no tighter than ``bend_px``
     (radius of curvature); its points (N, 2), radii (N,), and whether it ended by
     leaving the field."""
-    inner = vmap.valid
+    field = vmap.valid
     d = _heading(vmap, start)
     r0 = float(vmap.radius_px_at(start)[0])
     probe = start + d * 3 * EDGE_PX
     back = start - d * 3 * EDGE_PX
-    fwd_in = bool(_sample(inner, probe, order=0)[0])
-    back_in = bool(_sample(inner, back, order=0)[0])
+    fwd_in = bool(_sample(field, probe, order=0)[0])
+    back_in = bool(_sample(field, back, order=0)[0])
     if back_in and not fwd_in:
         d = -d
     n0 = np.array([-d[1], d[0]])
@@ -213,7 +215,7 @@ def _track(vmap: VesselnessMap, ridge: NDArray, start: FloatArray, clicks_px: Fl
         else:
             misses = 0
             p, d = centre, turned
-        if not bool(_sample(inner, p, order=0)[0]):
+        if not bool(_sample(field, p, order=0)[0]):
             left_field = True
             break
         if len(clicks_px):
@@ -338,7 +340,7 @@ def find_catheters(vmap: VesselnessMap, image: ArrayLike,
 
 def _shared(points_px: FloatArray, other: Catheter2D) -> float:
     """Fraction of ``points_px`` (N, 2) within the lumen of the tube ``other``."""
-    d = np.min(np.linalg.norm(points_px[:, None, :] - other.points_px[None, :, :], axis=2), axis=1)
+    d, _ = cKDTree(other.points_px).query(points_px)
     return float(np.mean(d <= np.median(other.radius_px)))
 
 
@@ -351,18 +353,15 @@ def catheter_runs(points_px: ArrayLike, catheters: tuple[Catheter2D, ...],
     pts = np.asarray(points_px, dtype=float)
     if len(pts) < 2 or not catheters:
         return []
-    tangent = np.gradient(pts, axis=0)
-    tangent /= np.maximum(np.linalg.norm(tangent, axis=1, keepdims=True), 1e-9)
+    tangent = _tangents(pts)
     along = np.zeros(len(pts), dtype=bool)
     for cath in catheters:
-        c_t = np.gradient(cath.points_px, axis=0)
-        c_t /= np.maximum(np.linalg.norm(c_t, axis=1, keepdims=True), 1e-9)
-        dist = np.linalg.norm(pts[:, None, :] - cath.points_px[None, :, :], axis=2)  # (N, M)
-        near = np.argmin(dist, axis=1)
-        inside = dist[np.arange(len(pts)), near] <= cath.radius_px[near] + 1.0
-        parallel = np.abs(np.sum(tangent * c_t[near], axis=1)) >= np.cos(np.deg2rad(30.0))
+        dist, near = cKDTree(cath.points_px).query(pts)
+        inside = dist <= cath.radius_px[near] + 1.0
+        parallel = (np.abs(np.sum(tangent * _tangents(cath.points_px)[near], axis=1))
+                    >= np.cos(np.deg2rad(30.0)))
         along |= inside & parallel
-    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(pts, axis=0), axis=1))])
+    s = arclength(pts)
     edges = np.diff(np.concatenate([[0], along.astype(int), [0]]))
     runs = zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1), strict=True)
     return [(int(i), int(j)) for i, j in runs if s[j - 1] - s[i] >= min_run_px]

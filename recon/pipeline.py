@@ -51,7 +51,7 @@ from recon.optimal_view import OptimalView, optimal_view
 from recon.seeds import Seeds
 from recon.surface import SurfaceResult, build_surface
 from recon.triangulation import build_centerline_3d, table3_metrics
-from recon.types import Angiogram, Centerline2D, Centerline3D, Matching
+from recon.types import Angiogram, Centerline2D, Centerline3D, Matching, arclength
 from recon.uncertainty import MeasurementIntervals, measurement_intervals, observability
 
 __all__ = [
@@ -575,10 +575,9 @@ def _catheter_report(cl: Centerline2D) -> list[dict]:
     """The catheter tubes of one view: where each enters the field, its tip, its length."""
     out = []
     for pts in cl.catheters_px:
-        length = float(np.sum(np.linalg.norm(np.diff(pts, axis=0), axis=1)))
         out.append({"entry_px": [round(float(v), 1) for v in pts[0]],
                     "tip_px": [round(float(v), 1) for v in pts[-1]],
-                    "length_px": round(length, 1)})
+                    "length_px": round(float(arclength(pts)[-1]), 1)})
     return out
 
 

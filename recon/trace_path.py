@@ -55,6 +55,7 @@ from scipy.spatial import cKDTree
 from recon.guide_catheter import Catheter2D
 from recon.route_loops import loop_apices, ring_circuits, route_distance
 from recon.trace_error import TraceError
+from recon.types import arclength
 from recon.vesselness import RADIUS_PER_SIGMA, VesselnessMap
 
 __all__ = ["Route", "minimal_route", "loop_apices", "ring_circuits", "RouteProblem",
@@ -300,8 +301,7 @@ def _catheter_maps(catheters: tuple[Catheter2D, ...],
             continue
         # the centre line every 0.5 px, painted into the box; each box pixel's nearest
         # painted pixel by a distance transform
-        seg = np.linalg.norm(np.diff(pts, axis=0), axis=1)
-        s = np.concatenate([[0.0], np.cumsum(seg)])
+        s = arclength(pts)
         s_fine = np.arange(0.0, s[-1] + 1e-9, 0.5)
         fine = np.column_stack([np.interp(s_fine, s, pts[:, j]) for j in (0, 1)])
         t = np.gradient(fine, axis=0)

@@ -47,7 +47,7 @@ from numpy.typing import NDArray
 from recon.calibration_model import ResidualModel
 from recon.geometry import ViewGeometry
 from recon.measure import Measurements
-from recon.types import Centerline3D
+from recon.types import Centerline3D, arclength
 
 FloatArray = NDArray[np.float64]
 
@@ -479,7 +479,6 @@ def measurement_intervals(
     from recon.measure import lumen_profile, measure_lumen
     from recon.sections import section_areas
     from recon.triangulation import radius_mm_eq11
-    from recon.types import arclength
 
     rng = np.random.default_rng(seed)
     X0, s0 = centerline.X_world, centerline.s_mm
@@ -599,8 +598,7 @@ def _end_draws(rng: np.random.Generator, X: FloatArray, s_mm: FloatArray,
         if len(idx) < 2:
             continue
         s3 = float(s_mm[idx[-1]] - s_mm[idx[0]])
-        per_px = [s3 / max(float(np.sum(np.linalg.norm(np.diff(p[idx], axis=0), axis=1))),
-                           1e-6) for p in projected]
+        per_px = [s3 / max(float(arclength(p[idx])[-1]), 1e-6) for p in projected]
         shifts = rng.normal(0.0, sigma_px, (n, 2)) * np.asarray(per_px)[None, :]
         total += shifts.mean(axis=1) * (1.0 if end == -1 else -1.0)
     return total

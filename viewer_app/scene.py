@@ -288,17 +288,17 @@ def label_places(pts: FloatArray) -> list[tuple[FloatArray, str]]:
     placed: list[FloatArray] = []
     out = []
     for p in np.asarray(pts, dtype=float).reshape(-1, 3):
-        overlaps = []
+        boxes, overlaps = [], []
         for offset, anchor in LABEL_PLACES:
             box = label_box(p[:2] + offset[:2], anchor, MARK_LABEL_WIDTH)
-            area = sum(max(0.0, min(box[1], b[1]) - max(box[0], b[0]))
-                       * max(0.0, min(box[3], b[3]) - max(box[2], b[2])) for b in placed)
-            overlaps.append(area)
-            if area == 0.0:
+            boxes.append(box)
+            overlaps.append(sum(max(0.0, min(box[1], b[1]) - max(box[0], b[0]))
+                                * max(0.0, min(box[3], b[3]) - max(box[2], b[2]))
+                                for b in placed))
+            if overlaps[-1] == 0.0:
                 break
         k = int(np.argmin(overlaps))
-        offset, anchor = LABEL_PLACES[k]
-        placed.append(label_box(p[:2] + offset[:2], anchor, MARK_LABEL_WIDTH))
+        placed.append(boxes[k])
         out.append(LABEL_PLACES[k])
     return out
 
