@@ -579,7 +579,8 @@ def _refuse_catheter_runs(path_px: FloatArray, click_index: NDArray[np.int64],
     raise TraceError(
         f"view {view}: the trace between click {leg} and click {leg + 1} runs along the "
         f"guiding catheter near ({near[0]:.0f}, {near[1]:.0f}); add a waypoint on the "
-        "vessel there", view=view, near_px=near)
+        "vessel there, or, if the vessel runs under the catheter there in this view, "
+        "choose another view", view=view, near_px=near)
 
 
 def _check_trace(vmap: VesselnessMap, points: FloatArray, radius: FloatArray,
