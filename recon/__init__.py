@@ -13,6 +13,7 @@ import importlib.util
 import sys
 import threading
 import types
+from collections.abc import Callable
 from typing import Any
 
 __version__ = "0.1.0"
@@ -31,15 +32,15 @@ _EXPORTS = {
     "Angiogram": "recon.types",
     "load_angiogram": "recon.io.angiogram",
     "LoadError": "recon.errors",
-    "compute_vesselness": "recon.centerline",
-    "trace_segment": "recon.centerline",
-    "calibrate": "recon.calibration",
-    "cbocd_descriptor": "recon.cbocd",
-    "match_centerlines": "recon.matching",
-    "build_centerline_3d": "recon.triangulation",
-    "build_surface": "recon.surface",
+    "compute_vesselness": "recon.trace.centerline",
+    "trace_segment": "recon.trace.centerline",
+    "calibrate": "recon.pose.calibration",
+    "cbocd_descriptor": "recon.correspond.cbocd",
+    "match_centerlines": "recon.correspond.matching",
+    "build_centerline_3d": "recon.correspond.triangulation",
+    "build_surface": "recon.lumen.surface",
     "export_mesh": "recon.io.outputs",
-    "measure_lumen": "recon.measure",
+    "measure_lumen": "recon.lumen.measure",
     "make_phantom": "recon.synth",
     "ReconstructionOptions": "recon.pipeline",
     "reconstruct_pair": "recon.pipeline",
@@ -48,11 +49,30 @@ _EXPORTS = {
 __all__ = ["__version__", *_EXPORTS]
 
 
-def __getattr__(name: str) -> Any:
-    module = _EXPORTS.get(name)
-    if module is None:
-        raise AttributeError(f"module 'recon' has no attribute {name!r}")
-    return getattr(importlib.import_module(module), name)
+def lazy_exports(
+    package: str, exports: dict[str, str]
+) -> tuple[Callable[[str], Any], Callable[[], list[str]]]:
+    """A package's ``__getattr__`` and ``__dir__`` (PEP 562) that load each name of
+    ``exports`` ({name: module}) from its module on first use."""
+
+    def getattr_(name: str) -> Any:
+        module = exports.get(name)
+        if module is None:
+            raise AttributeError(f"module {package!r} has no attribute {name!r}")
+        return getattr(importlib.import_module(module), name)
+
+    def dir_() -> list[str]:
+        return sorted({*globals_of(package), *exports})
+
+    return getattr_, dir_
+
+
+def globals_of(package: str) -> list[str]:
+    """The names a loaded module holds."""
+    return list(vars(sys.modules[package]))
+
+
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)
 
 
 #: Modules imported at start-up by a library but used only on a path that a

@@ -571,7 +571,10 @@ def cmd_view(args: argparse.Namespace) -> int:
 
 
 def cmd_bench(args: argparse.Namespace) -> int:
-    module = importlib.import_module(f"recon.bench.{args.name.replace('-', '_')}")
+    tree_suite = args.name == "reconstruct" and args.suite.startswith("tree")
+    # the tree suites' end-to-end bench has its own module (recon.bench.tree)
+    name = "tree" if tree_suite else args.name.replace("-", "_")
+    module = importlib.import_module(f"recon.bench.{name}")
     extra = {}
     if args.suite.startswith("tree") and args.name != "reconstruct":
         print(f"coronary3d: error: bench {args.name} has no --suite {args.suite} "
@@ -598,8 +601,16 @@ def cmd_bench(args: argparse.Namespace) -> int:
                   "suite), intervals and calibration-modes", file=sys.stderr)
             return EXIT_USER_ERROR
         extra["workers"] = args.workers
-    result = module.run(cases=args.cases, seed=args.seed, **extra)
-    print(module.format_table(result))
+    if tree_suite:
+        if args.jitter:
+            print("coronary3d: error: --jitter is for the regular and varied suites",
+                  file=sys.stderr)
+            return EXIT_USER_ERROR
+        result = module.run_tree(args.cases, args.seed, args.suite)
+        print(module.format_tree(result))
+    else:
+        result = module.run(cases=args.cases, seed=args.seed, **extra)
+        print(module.format_table(result))
     if args.json:
         from recon.io.files import atomic_write_bytes
 

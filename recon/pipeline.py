@@ -5,7 +5,7 @@ the command line (`coronary3d reconstruct`) and the viewer both call it.
 
     trace both views -> calibrate view B on the clicked features (PALM, eq. 5)
     -> match (CBOCD + DP, eqs. 6-10)
-    -> triangulate + smooth (eqs. 2-3) -> densitometric area (recon.densitometry)
+    -> triangulate + smooth (eqs. 2-3) -> densitometric area (recon.lumen.densitometry)
     -> elliptic sections + surface
        (sec. 3.5, eq. 11) -> 3D measurements -> foreshortening and the best next view
 
@@ -26,33 +26,48 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from recon import __version__
-from recon.bifurcation import Junction
-from recon.calibration import (
-    CORRECTIONS,
-    CalibrationResult,
-    calibrate,
-    calibrate_supported,
-    refine_with_matches,
+from recon.correspond import (
+    ConsistencyResult,
+    build_centerline_3d,
+    check_consistency,
+    match_centerlines,
+    table3_metrics,
 )
-from recon.calibration_curves import calibrate_with_curves
-from recon.centerline import VesselnessMap, compute_vesselness, trace_segment
-from recon.consistency import ConsistencyResult, check_consistency
-from recon.densitometry import with_fill_ratios
 from recon.errors import CoronaryError
 from recon.geometry import MIN_VIEW_SEPARATION_DEG, ViewGeometry, view_separation_deg
-from recon.intensity import (
+from recon.lumen import (
+    Junction,
+    LumenProfile,
+    Measurements,
+    SurfaceResult,
+    build_surface,
+    lumen_profile,
+    measure_lumen,
+    with_fill_ratios,
+)
+from recon.pose import (
+    CORRECTIONS,
+    CalibrationResult,
+    MeasurementIntervals,
+    OptimalView,
+    calibrate,
+    calibrate_supported,
+    calibrate_with_curves,
+    measurement_intervals,
+    observability,
+    optimal_view,
+    refine_with_matches,
+)
+from recon.seeds import Seeds
+from recon.trace import (
     IntensityMapping,
+    VesselnessMap,
+    compute_vesselness,
     is_display_processed,
     resolve_mapping,
+    trace_segment,
 )
-from recon.matching import match_centerlines
-from recon.measure import LumenProfile, Measurements, lumen_profile, measure_lumen
-from recon.optimal_view import OptimalView, optimal_view
-from recon.seeds import Seeds
-from recon.surface import SurfaceResult, build_surface
-from recon.triangulation import build_centerline_3d, table3_metrics
 from recon.types import Angiogram, Centerline2D, Centerline3D, Matching, arclength
-from recon.uncertainty import MeasurementIntervals, measurement_intervals, observability
 
 __all__ = [
     "PipelineError",
@@ -95,16 +110,16 @@ class ReconstructionOptions:
     intensity_a, intensity_b : how each view's stored values relate to the
         attenuation: "lin" (linear in X-ray intensity), "log" (linear in
         attenuation) or "auto" (the file's PixelIntensityRelationship when it
-        says LIN or LOG, else estimated from the image; :mod:`recon.intensity`).
+        says LIN or LOG, else estimated from the image; :mod:`recon.trace.intensity`).
     voxel_mm : surface grid size (None: chosen from the vessel radius).
     allow_close_views : go on (with a warning) when the views' central rays are less
         than :data:`MIN_VIEW_SEPARATION_DEG` apart; refused otherwise.
     calibration : how far view B moves from its header: "full" (all six rig
         parameters, the default), "supported" (the correction the clicks support,
-        :func:`recon.calibration.calibrate_supported`: the header, a translation of
+        :func:`recon.pose.calibration.calibrate_supported`: the header, a translation of
         B's rig, or the full correction), "header" (B stays at its header pose) or
         "curves" (the full correction from the clicks and the two traced curves
-        jointly, :func:`recon.calibration_curves.calibrate_with_curves`).
+        jointly, :func:`recon.pose.calibration_curves.calibrate_with_curves`).
         "supported" keeps good real headers (tests/recon/test_real_views.py) but its
         translation-only choice costs accuracy where the header is off in rotation
         too, as on the phantoms (docs/benchmarks.md); so it is not the default yet.
@@ -144,12 +159,12 @@ class Reconstruction:
     measurements: Measurements
     metrics: dict
     timings_ms: dict = field(default_factory=dict)
-    # cross-view check of the 3D centerline (recon.consistency), and one-line warnings
+    # cross-view check of the 3D centerline (recon.correspond.consistency), and one-line warnings
     # about the inputs and the stretches that failed it
     consistency: ConsistencyResult | None = None
     warnings: tuple[str, ...] = ()
     optimal_view: OptimalView | None = None  # foreshortening map and the best next view
-    # 95 % intervals of the measurements and the radius (recon.uncertainty); None when
+    # 95 % intervals of the measurements and the radius (recon.pose.uncertainty); None when
     # the calibration carries no posterior (self-calibration)
     intervals: MeasurementIntervals | None = None
 
@@ -340,7 +355,7 @@ def reconstruct_pair(
         when the caller made them (the tree, :mod:`recon.tree`, traces every
         branch and calibrates once for all); those stages are then skipped.
     junction : a branch's parent; the 3D centerline's start is joined to it
-        (:meth:`recon.bifurcation.Junction.join`).
+        (:meth:`recon.lumen.bifurcation.Junction.join`).
     best_view : compute the best next view (``optimal_view``); the tree turns it off
         and chooses each branch's view with the other branches in sight.
     """
@@ -425,7 +440,7 @@ def reconstruct_pair(
     measurements = measure_lumen(profile)
     lap("measure")
 
-    # 8. Foreshortening in both views and the best next view (recon.optimal_view).
+    # 8. Foreshortening in both views and the best next view (recon.pose.optimal_view).
     next_view = None
     if best_view:
         next_view = optimal_view(cl3d.X_world, profile.smooth_radius_at(cl3d.s_mm), view_a,
@@ -493,7 +508,7 @@ def _trace(
 
     A display-processed file (tag DISP, DRM, ...) with the mapping left to "auto" is
     neither "lin" nor "log": its radius is fitted under the Box-Cox power that the
-    trace's own profiles fit best (:func:`recon.centerline.trace_segment` given "auto").
+    trace's own profiles fit best (:func:`recon.trace.centerline.trace_segment` given "auto").
     """
     relationship = angio.info.get("pixel_intensity_relationship")
     fit_power = intensity == "auto" and is_display_processed(relationship)

@@ -10,8 +10,8 @@
     -> per segment, parents first: the stages of ``reconstruct_pair``
        (matching, triangulation, sections, QCA) with the tree's calibration,
        a branch joined to its parent at the bifurcation
-    -> branch QCA from the carina on, bifurcation QCA (recon.bifurcation)
-    -> one watertight mesh, the union of the branches (recon.surface)
+    -> branch QCA from the carina on, bifurcation QCA (recon.lumen.bifurcation)
+    -> one watertight mesh, the union of the branches (recon.lumen.surface)
 
 A tree of one segment is exactly ``reconstruct_pair`` of that segment.
 """
@@ -24,21 +24,21 @@ from dataclasses import dataclass, replace
 import numpy as np
 import trimesh
 
-from recon.bifurcation import (
+from recon.correspond import match_centerlines, point_polyline_distance
+from recon.errors import CoronaryError
+from recon.geometry import ViewGeometry, triangulate
+from recon.lumen import (
     BifurcationQCA,
     Junction,
+    TreeSurface,
     bifurcation_qca,
+    build_tree_surface,
     carina_s_mm,
     fill_names,
     literal,
+    lumen_profile,
+    measure_lumen,
 )
-from recon.calibration import CalibrationResult, refine_with_matches
-from recon.centerline import VesselnessMap, compute_vesselness
-from recon.errors import CoronaryError
-from recon.geometry import ViewGeometry, triangulate
-from recon.matching import match_centerlines
-from recon.measure import lumen_profile, measure_lumen
-from recon.optimal_view import optimal_view
 from recon.pipeline import (
     PipelineError,
     Progress,
@@ -51,12 +51,10 @@ from recon.pipeline import (
     check_calibration,
     reconstruct_pair,
 )
+from recon.pose import CalibrationResult, measurement_intervals, optimal_view, refine_with_matches
 from recon.seeds import Seeds, Segment
-from recon.surface import TreeSurface, build_tree_surface
-from recon.trace_error import TraceError
-from recon.triangulation import point_polyline_distance
+from recon.trace import TraceError, VesselnessMap, compute_vesselness
 from recon.types import Angiogram, Centerline2D, arclength
-from recon.uncertainty import measurement_intervals
 
 __all__ = [
     "TreeReconstruction",
@@ -168,7 +166,7 @@ def tree_calibration(angio_a: Angiogram, angio_b: Angiogram, seeds: Seeds,
     ``options.self_calibration`` and two or more segments the matched
     centerline points of all of them (:data:`MATCHED_POINTS_PER_BRANCH`
     each, matched under that first pose) are added with the robust loss
-    (:func:`recon.calibration.refine_with_matches`); off by default, as for
+    (:func:`recon.pose.calibration.refine_with_matches`); off by default, as for
     one segment (docs/benchmarks.md, the tree suite, has the measurement).
     """
     view_a, view_b = angio_a.geometry, angio_b.geometry
@@ -273,7 +271,7 @@ def reconstruct_tree(
 
 
 def _best_views_among_branches(branches: list[Reconstruction]) -> list[Reconstruction]:
-    """Each branch with its best next view (recon.optimal_view) chosen with the tree's other
+    """Each branch with its best next view (recon.pose.optimal_view) chosen with the tree's other
     branches as the vessels it must not overlap."""
     shapes = [(rec.centerline_3d.X_world, rec.profile.smooth_radius_at(rec.centerline_3d.s_mm))
               for rec in branches]
@@ -283,7 +281,7 @@ def _best_views_among_branches(branches: list[Reconstruction]) -> list[Reconstru
 
 
 #: Reliability given to a traced point whose lumen another segment's lumen overlaps in
-#: that view (below recon.triangulation.OVERLAP_RELIABILITY: the other view's radius is
+#: that view (below recon.correspond.triangulation.OVERLAP_RELIABILITY: the other view's radius is
 #: used there when that view is clear).
 TREE_OVERLAP_RELIABILITY = 0.05
 #: Two lumen discs overlap when their centres are closer than this fraction of the sum of
@@ -306,7 +304,7 @@ def _mark_tree_overlaps(traced: list[tuple[Centerline2D, Centerline2D]]
                         ) -> list[tuple[Centerline2D, Centerline2D]]:
     """Every segment's traces with the reliability lowered where another segment of the
     tree overlaps its lumen in that view, so that the view where the two lumens are
-    apart gives the radius there (recon.triangulation, step 5)."""
+    apart gives the radius there (recon.correspond.triangulation, step 5)."""
     out = []
     for k, pair in enumerate(traced):
         marked = []
@@ -395,7 +393,7 @@ def _origin_from_the_clear_view(pair: tuple[Centerline2D, Centerline2D],
     interpolated by arc length between the triangulated origin and the
     triangulated (S, S'), projected into view v and resampled to the stretch's
     point count. Their reliability is lowered, so the radius there is the other
-    view's (recon.triangulation, step 5).
+    view's (recon.correspond.triangulation, step 5).
 
     When S's epipolar line misses the other view's trace by more than
     :data:`ORIGIN_MATCH_PX`, S is on no point of the branch that view sees: view v's

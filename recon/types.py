@@ -107,10 +107,10 @@ class Centerline2D:
         (0 = -log, values linear in intensity; 1 = linear in attenuation), or None.
     blur_px : Gaussian blur (px) of the radius model the fit used, or None.
     depth : (N,) the profile fit's depth: absorption per px of chord of the fitted
-        circle template (:mod:`recon.profile_fit`), the densitometric signal of
-        :mod:`recon.densitometry`; None when not measured.
+        circle template (:mod:`recon.trace.profile_fit`), the densitometric signal of
+        :mod:`recon.lumen.densitometry`; None when not measured.
     catheters_px : centre lines (M_i, 2), field edge first, of the catheter tubes found
-        in the image (:mod:`recon.guide_catheter`), which the trace did not follow.
+        in the image (:mod:`recon.trace.guide_catheter`), which the trace did not follow.
     """
 
     points_px: FloatArray
@@ -229,12 +229,12 @@ class Centerline3D:
     points_a_px, points_b_px : (K, 2) the matched pixels behind X_raw_world.
     overlap_a, overlap_b : (M,) bool, True where that view's radius could not
         be trusted (another vessel overlapping) and the other view's radius
-        stands in for it (see :func:`recon.triangulation.build_centerline_3d`);
+        stands in for it (see :func:`recon.correspond.triangulation.build_centerline_3d`);
         all False when not given.
     depth_a, depth_b : (M,) each view's profile-fit depth at the matched points
         (:attr:`Centerline2D.depth`), or None.
     fill_a, fill_b : (M,) the densitometric area over each view's caliper circle,
-        A / (pi r_k^2) (:func:`recon.densitometry.with_fill_ratios`), or None: then
+        A / (pi r_k^2) (:func:`recon.lumen.densitometry.with_fill_ratios`), or None: then
         the sections are built from the two calipers alone.
     fit_radius_a_mm, fit_radius_b_mm : (M,) each view's own fitted radius where
         ``overlap_a``/``overlap_b`` replaced it (the two views' disagreement before

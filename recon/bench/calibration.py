@@ -32,7 +32,7 @@ against the phantom's ``view_b_true``:
 Self-calibration (sec. 3.4.2 and the final bundle adjustment): after the
 features-only PALM calibration, matched centerline pairs are added and view
 B is recalibrated from the header with the priors and a Huber loss
-(:func:`recon.calibration.refine_with_matches`). No matcher is used here:
+(:func:`recon.pose.calibration.refine_with_matches`). No matcher is used here:
 the TRUE projected segment centerline, sampled every ~1 mm in both views
 with 0.3 px noise, stands in for the traced centerlines and is paired in
 two ways, both reported:
@@ -46,7 +46,7 @@ two ways, both reported:
   an upper bound for a perfect matcher.
 
 Curves (``self_calibration.with_curves``): the clicks and the same noisy true
-curves, without pairs, by :func:`recon.calibration_curves.calibrate_with_curves`
+curves, without pairs, by :func:`recon.pose.calibration_curves.calibrate_with_curves`
 (the epipolar distance of every curve point to the other view's curve, Cauchy
 loss; "pairs" is then the number of curve points).
 
@@ -76,14 +76,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from recon.bench.common import pose_error
-from recon.calibration import (
+from recon.geometry import ViewGeometry, epipolar_lines, triangulate
+from recon.pose.calibration import (
     CalibrationPriors,
     CalibrationResult,
     calibrate,
     refine_with_matches,
 )
-from recon.calibration_curves import calibrate_with_curves
-from recon.geometry import ViewGeometry, epipolar_lines, triangulate
+from recon.pose.calibration_curves import calibrate_with_curves
 from recon.synth import PhantomCase, click_px, make_phantom
 
 __all__ = ["run", "format_table", "pose_errors", "epipolar_pairs", "reference_poses"]

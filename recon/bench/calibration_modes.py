@@ -8,9 +8,9 @@ calibrated from the same inputs in each mode of ``ReconstructionOptions.calibrat
 - "header": no correction;
 - "full": the six rig parameters from the clicks;
 - "supported": header, translation or full by Laplace evidence
-  (:func:`recon.calibration.calibrate_supported`);
+  (:func:`recon.pose.calibration.calibrate_supported`);
 - "curves": the full correction from the clicks and the traced curves jointly
-  (:func:`recon.calibration_curves.calibrate_with_curves`).
+  (:func:`recon.pose.calibration_curves.calibrate_with_curves`).
 
 The figure of merit is the **3D error of the segment** with that pose: the truth's
 segment points, projected exactly into A and into B's true pose, triangulated with
@@ -39,6 +39,7 @@ from recon.bench.common import (
     median,
     parallel_map,
     pose_error,
+    scale_free_error_mm,
 )
 from recon.geometry import triangulate
 
@@ -47,15 +48,6 @@ MARGIN_MM = 0.1
 TARGET_NO_WORSE = 0.95
 CASES = 24  # regular-suite cases when run(cases=None)
 STENOSIS_PCT = 50.0
-
-
-def scale_free_error_mm(X_rec, X_true, source_a) -> tuple[float, float]:
-    """RMS distance (mm) of X_rec (P, 3) from its counterparts X_true (P, 3) after the
-    best scaling about view A's source ``source_a`` (3,), and that scale (closed form)."""
-    a = np.asarray(X_rec) - source_a
-    b = np.asarray(X_true) - source_a
-    k = float(np.sum(a * b) / np.sum(a * a))
-    return float(np.sqrt(np.mean(np.sum((k * a - b) ** 2, axis=1)))), k
 
 
 def _case(which):
@@ -75,10 +67,10 @@ def _case(which):
 def evaluate_case(which) -> dict:
     """One case: the 3D error per mode, or its failure (runs in a worker)."""
     from recon.bench.reconstruct import case_angiograms
-    from recon.calibration import calibrate_supported
-    from recon.calibration_curves import calibrate_with_curves
-    from recon.centerline import compute_vesselness
     from recon.pipeline import _features, _trace_pair
+    from recon.pose.calibration import calibrate_supported
+    from recon.pose.calibration_curves import calibrate_with_curves
+    from recon.trace.centerline import compute_vesselness
 
     case, key = _case(which)
     try:

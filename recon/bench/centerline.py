@@ -60,15 +60,15 @@ from recon.bench.common import (
     percentile,
     varied_rows,
 )
-from recon.centerline import (
+from recon.geometry import ViewGeometry
+from recon.synth import PhantomTruth, make_phantom
+from recon.trace.centerline import (
     VesselnessMap,
     compute_vesselness,
     snap_click,
     trace_segment,
 )
-from recon.geometry import ViewGeometry
-from recon.guide_catheter import find_catheters
-from recon.synth import PhantomTruth, make_phantom
+from recon.trace.guide_catheter import find_catheters
 from recon.types import arclength
 
 __all__ = ["run", "format_table", "PRESET_CYCLE", "END_EXCLUSION_PX", "CASES", "SUCCESS_PX",

@@ -24,8 +24,11 @@ from collections.abc import Callable
 
 import numpy as np
 from numpy.typing import ArrayLike
+from scipy.spatial import cKDTree
 
 from recon.geometry import ViewGeometry, rotvec_from_rotation
+from recon.synth import PhantomCase
+from recon.types import Angiogram
 
 __all__ = [
     "PRESET_CYCLE",
@@ -218,3 +221,69 @@ def varied_rows(result: dict, line: Callable[[str, dict], str], rule: str) -> li
     rows += [rule, line("overall", result["overall"]), "", "by anatomy"]
     rows += [line(name, f) for name, f in result["anatomy"].items()]
     return [*rows, ""]
+
+
+def _angiogram(image: np.ndarray, view: ViewGeometry, name: str) -> Angiogram:
+    return Angiogram(
+        image=image.astype(np.float32),
+        geometry=view,
+        path=name,
+        frame_index=0,
+        frame_reason="single frame",
+        n_frames=1,
+        frame_time_ms=None,
+        frames=None,
+        geometry_notes=(),
+        info={},
+    )
+
+
+def polyline_distance_mm(points: np.ndarray, truth_dense: np.ndarray) -> np.ndarray:
+    """Distance (N,) from points (N, 3) to a densely sampled polyline (M, 3)."""
+    dist, _ = cKDTree(truth_dense).query(points)
+    return dist
+
+
+def scale_free_rms_mm(X_world: np.ndarray, truth_dense: np.ndarray, source_a: np.ndarray
+                      ) -> tuple[float, float]:
+    """3D RMS error after the best scaling about view A's source, and that scale.
+
+    Two views fix view B's pose only up to the length of the baseline (moving
+    B's rig along the line between the sources changes no epipolar line), so
+    a reconstruction is determined up to a scaling about A's source: this is
+    the error that remains once that unobservable factor is removed.
+    """
+    from scipy.optimize import minimize_scalar
+
+    tree = cKDTree(truth_dense)
+
+    def rms(k: float) -> float:
+        d, _ = tree.query(source_a + k * (X_world - source_a))
+        return float(np.sqrt(np.mean(d**2)))
+
+    res = minimize_scalar(rms, bounds=(0.9, 1.1), method="bounded",
+                          options={"xatol": 1e-6})
+    return float(res.fun), float(res.x)
+
+
+def case_angiograms(case: PhantomCase) -> tuple[Angiogram, Angiogram]:
+    """View A (true = header geometry) and view B (header geometry) as angiograms.
+
+    A chain's case carries its tag and bits stored in ``info`` (see
+    :func:`recon.bench.common.case_angiogram`); a plain case has none.
+    """
+    if case.chain is None:
+        return (_angiogram(case.image_a, case.view_a, f"{case.preset}-{case.seed}-a"),
+                _angiogram(case.image_b, case.view_b_nominal, f"{case.preset}-{case.seed}-b"))
+    return (case_angiogram(case.image_a, case.view_a, f"{case.preset}-{case.seed}-a", case.chain),
+            case_angiogram(case.image_b, case.view_b_nominal, f"{case.preset}-{case.seed}-b",
+                           case.chain))
+
+
+def scale_free_error_mm(X_rec, X_true, source_a) -> tuple[float, float]:
+    """RMS distance (mm) of X_rec (P, 3) from its counterparts X_true (P, 3) after the
+    best scaling about view A's source ``source_a`` (3,), and that scale (closed form)."""
+    a = np.asarray(X_rec) - source_a
+    b = np.asarray(X_true) - source_a
+    k = float(np.sum(a * b) / np.sum(a * a))
+    return float(np.sqrt(np.mean(np.sum((k * a - b) ** 2, axis=1)))), k

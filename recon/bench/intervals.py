@@ -3,7 +3,7 @@
 For each phantom case (preset ``PRESET_CYCLE[k % 4]``, seed ``seed + k``, diameter
 stenosis drawn uniformly in :data:`STENOSIS_RANGE_PCT` from the case seed) the
 whole ``reconstruct_pair`` runs (default options: the full calibration and
-its intervals, :mod:`recon.uncertainty`) and each figure's ``measurements_ci95``
+its intervals, :mod:`recon.pose.uncertainty`) and each figure's ``measurements_ci95``
 is checked against the phantom's truth:
 
 - ``mld_mm`` against the true MLD, ``reference_diameter_mm`` against the true
@@ -29,8 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from recon.bench.common import PRESET_CYCLE, median
-from recon.bench.reconstruct import case_angiograms
+from recon.bench.common import PRESET_CYCLE, case_angiograms, median
 from recon.pipeline import ReconstructionOptions, reconstruct_pair
 from recon.synth import make_phantom
 

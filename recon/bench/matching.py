@@ -3,12 +3,12 @@
 For each synthetic case (the paper's Table 1 geometries and the static
 preset, cycling, seeds ``seed, seed + 1, ...``):
 
-1. trace both views from the seeds' segment clicks (``recon.centerline``);
+1. trace both views from the seeds' segment clicks (``recon.trace.centerline``);
 2. calibrate view B from the header with the clicked correspondences
-   (``recon.calibration.calibrate``, PALM);
+   (``recon.pose.calibration.calibrate``, PALM);
 3. for each matcher match1..match4: match, recalibrate once with the
    deviation pairs (sec. 3.4.2) added to the features and match again,
-   triangulate and smooth (``recon.triangulation``), then the Table-3
+   triangulate and smooth (``recon.correspond.triangulation``), then the Table-3
    back-projection errors and the TRUE 3D error: RMS distance from the
    reconstructed centerline to the truth's dense polyline;
 4. the same matching with view B's TRUE geometry, which isolates the
@@ -47,13 +47,17 @@ import time
 import numpy as np
 
 from recon.bench.common import PRESET_CYCLE
-from recon.calibration import calibrate
-from recon.cbocd import cbocd_parts
-from recon.centerline import TraceError, trace_segment
+from recon.correspond.cbocd import cbocd_parts
+from recon.correspond.matching import MATCHERS, dp_match, match_centerlines
+from recon.correspond.triangulation import (
+    build_centerline_3d,
+    point_polyline_distance,
+    table3_metrics,
+)
 from recon.geometry import ViewGeometry
-from recon.matching import MATCHERS, dp_match, match_centerlines
+from recon.pose.calibration import calibrate
 from recon.synth import PhantomCase, make_phantom
-from recon.triangulation import build_centerline_3d, point_polyline_distance, table3_metrics
+from recon.trace.centerline import TraceError, trace_segment
 from recon.types import Centerline2D, arclength
 
 __all__ = ["run", "format_table", "time_dp_1000", "foreshortening_ratio", "hard_case_keys"]

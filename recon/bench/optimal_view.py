@@ -3,7 +3,7 @@
 For each regular-suite case (the paper's Table-1 geometries and the static
 preset, as `bench reconstruct`) the full `reconstruct_pair` runs from the
 rendered images, the header geometry and the noisy clicks, and its
-`optimal_view` recommends a C-arm angle (:mod:`recon.optimal_view`: the
+`optimal_view` recommends a C-arm angle (:mod:`recon.pose.optimal_view`: the
 LAO/RAO x CRA/CAU map of foreshortening + overlap of the reconstructed
 segment). The bench then measures, on the TRUE segment
 (``PhantomTruth.segment_X_world``), the foreshortening a view at that angle
@@ -32,8 +32,8 @@ import time
 import numpy as np
 
 from recon.bench.common import PRESET_CYCLE, median
-from recon.optimal_view import foreshortening_pct, optimal_view, overlap_pct
 from recon.pipeline import ReconstructionOptions, reconstruct_pair
+from recon.pose.optimal_view import foreshortening_pct, optimal_view, overlap_pct
 from recon.synth import make_phantom
 
 __all__ = ["CASES", "TARGET_PCT", "run", "format_table", "evaluate_case"]
@@ -47,7 +47,7 @@ OSTIUM_MM = 8.0  # a branch's first mm join the segment: not an overlap
 def evaluate_case(preset: str, case_seed: int) -> dict:
     """One case's figures: the recommended angle, its claimed and true foreshortening (%),
     the acquired views' true foreshortening and the truth map's best."""
-    from recon.bench.reconstruct import case_angiograms
+    from recon.bench.common import case_angiograms
 
     case = make_phantom(preset, case_seed, stenosis_pct=STENOSIS_PCT)
     a, b = case_angiograms(case)

@@ -6,7 +6,7 @@ images, the header geometry and the noisy clicks, and its results are
 compared with the truth: 3D centerline error, MLD, % diameter stenosis,
 segment length, mesh volume, and the true-pose error of calibrated view B
 (:func:`recon.bench.common.pose_error`). The mesh is closed by a cap on each end
-(:mod:`recon.surface`), so its volume is compared with the true segment closed the
+(:mod:`recon.lumen.surface`), so its volume is compared with the true segment closed the
 same way (:func:`closed_truth_volume_mm3`); the lumen volume between the ends (the
 sections' areas integrated along the centerline, no caps) is compared with the true
 segment's as ``section_volume_error_pct``.
@@ -39,25 +39,24 @@ from __future__ import annotations
 import time
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from recon.bench.common import (
     PRESET_CYCLE,
     VARIED_CASES_PER_CHAIN,
-    case_angiogram,
+    case_angiograms,
     check_suite,
     jitter_seeds,
     median,
     parallel_map,
     percentile,
+    polyline_distance_mm,
     pose_error,
     rigid_rms_mm,
+    scale_free_rms_mm,
     varied_rows,
 )
-from recon.geometry import ViewGeometry
 from recon.pipeline import Reconstruction, ReconstructionOptions, reconstruct_pair
 from recon.synth import PhantomCase, PhantomTruth, make_phantom
-from recon.types import Angiogram
 
 CASES = 8  # phantom cases when run(cases=None)
 STENOSIS_PCT = 50.0  # diameter stenosis of every case
@@ -66,63 +65,6 @@ JITTER_PX = 2.0  # click stability: every click moves up to this far (uniform in
 STABLE_MLD_SPREAD_MM = 0.1
 STABLE_SITE_SPREAD_MM = 2.0
 RIGID_RMS_LIMIT_MM = 0.6  # the target: no case above this after a rigid alignment
-
-
-def _angiogram(image: np.ndarray, view: ViewGeometry, name: str) -> Angiogram:
-    return Angiogram(
-        image=image.astype(np.float32),
-        geometry=view,
-        path=name,
-        frame_index=0,
-        frame_reason="single frame",
-        n_frames=1,
-        frame_time_ms=None,
-        frames=None,
-        geometry_notes=(),
-        info={},
-    )
-
-
-def polyline_distance_mm(points: np.ndarray, truth_dense: np.ndarray) -> np.ndarray:
-    """Distance (N,) from points (N, 3) to a densely sampled polyline (M, 3)."""
-    dist, _ = cKDTree(truth_dense).query(points)
-    return dist
-
-
-def scale_free_rms_mm(X_world: np.ndarray, truth_dense: np.ndarray, source_a: np.ndarray
-                      ) -> tuple[float, float]:
-    """3D RMS error after the best scaling about view A's source, and that scale.
-
-    Two views fix view B's pose only up to the length of the baseline (moving
-    B's rig along the line between the sources changes no epipolar line), so
-    a reconstruction is determined up to a scaling about A's source: this is
-    the error that remains once that unobservable factor is removed.
-    """
-    from scipy.optimize import minimize_scalar
-
-    tree = cKDTree(truth_dense)
-
-    def rms(k: float) -> float:
-        d, _ = tree.query(source_a + k * (X_world - source_a))
-        return float(np.sqrt(np.mean(d**2)))
-
-    res = minimize_scalar(rms, bounds=(0.9, 1.1), method="bounded",
-                          options={"xatol": 1e-6})
-    return float(res.fun), float(res.x)
-
-
-def case_angiograms(case: PhantomCase) -> tuple[Angiogram, Angiogram]:
-    """View A (true = header geometry) and view B (header geometry) as angiograms.
-
-    A chain's case carries its tag and bits stored in ``info`` (see
-    :func:`recon.bench.common.case_angiogram`); a plain case has none.
-    """
-    if case.chain is None:
-        return (_angiogram(case.image_a, case.view_a, f"{case.preset}-{case.seed}-a"),
-                _angiogram(case.image_b, case.view_b_nominal, f"{case.preset}-{case.seed}-b"))
-    return (case_angiogram(case.image_a, case.view_a, f"{case.preset}-{case.seed}-a", case.chain),
-            case_angiogram(case.image_b, case.view_b_nominal, f"{case.preset}-{case.seed}-b",
-                           case.chain))
 
 
 def evaluate_case(case: PhantomCase, options: ReconstructionOptions, *,
@@ -172,7 +114,7 @@ def _trace_figures(case: PhantomCase, rec: Reconstruction) -> dict:
 def closed_truth_volume_mm3(truth: PhantomTruth) -> float:
     """The true segment's volume closed as the mesh is closed: its lumen volume
     (pi * integral r^2 ds) plus a hemisphere on each end section, the half-ellipsoid
-    caps of :mod:`recon.surface` for a round lumen (mm^3)."""
+    caps of :mod:`recon.lumen.surface` for a round lumen (mm^3)."""
     r = truth.segment_radius_mm
     return float(truth.segment_volume_mm3 + 2.0 / 3.0 * np.pi * (r[0] ** 3 + r[-1] ** 3))
 
@@ -245,10 +187,6 @@ def run(cases: int | None = None, seed: int = 0, suite: str = "regular",
     local Dask cluster of that many processes (the engine of `coronary3d
     batch`); None runs them one after another in this process.
     """
-    if suite in ("tree", "tree-varied"):  # phantom trees with bifurcation lesions
-        from recon.bench.tree import run_tree
-
-        return run_tree(cases, seed, suite)
     check_suite(suite)
     if jitter < 0:
         raise ValueError(f"jitter must be >= 0, got {jitter}")
@@ -330,10 +268,6 @@ def format_table(result: dict) -> str:
     """Plain-text table of a :func:`run` result."""
     if result.get("suite") == "varied":
         return _format_varied(result)
-    if result.get("suite") in ("tree", "tree-varied"):
-        from recon.bench.tree import format_tree
-
-        return format_tree(result)
     lines = [
         f"End-to-end reconstruction on {result['cases']} phantom cases "
         f"(self-calibration {'on' if result['self_calibration'] else 'off'})",

@@ -6,8 +6,8 @@ elliptic shape (axis ratio uniform in :data:`AXIS_RATIO_RANGE`, minor semi-axis
 the isocenter with a random direction, seen by the two views of a preset
 (``PRESET_CYCLE``). Each view's projected half-width is what it really is: the
 ellipse's support (half caliper width) along that view's intersection line
-(:func:`recon.surface.intersection_directions`). The section builder
-(:func:`recon.surface.elliptic_cross_sections`) gets those two widths; its area
+(:func:`recon.lumen.surface.intersection_directions`). The section builder
+(:func:`recon.lumen.surface.elliptic_cross_sections`) gets those two widths; its area
 is compared with the truth per axis-ratio bin.
 
 Two widths cannot fix an ellipse (three unknowns: two semi-axes and an
@@ -24,9 +24,9 @@ vessel with one elliptic stenosis (:mod:`recon.synth.elliptic_tube`; axis ratio
 uniform in :data:`AXIS_RATIO_RANGE`, minor semi-axis 0.5-0.9 mm, random
 orientation, lesion 8-16 mm long, round reference 1.2 x the major semi-axis,
 1.4-2.8 mm) rendered into both views of a preset (true geometry, no header
-error), traced (:func:`recon.centerline.trace_segment`), matched and
+error), traced (:func:`recon.trace.centerline.trace_segment`), matched and
 triangulated; the section area at the lesion centre from the two calipers alone
-and with the densitometric fill ratios (:mod:`recon.densitometry`), per bin.
+and with the densitometric fill ratios (:mod:`recon.lumen.densitometry`), per bin.
 """
 
 
@@ -36,7 +36,7 @@ import numpy as np
 
 from recon.bench.common import PRESET_CYCLE
 from recon.errors import CoronaryError
-from recon.surface import elliptic_cross_sections, intersection_directions
+from recon.lumen.surface import elliptic_cross_sections, intersection_directions
 from recon.synth import PRESETS
 from recon.types import Centerline3D
 
@@ -210,11 +210,11 @@ def _draw_tube(rng: np.random.Generator, view_a, view_b):
 
 def _image_case(rng: np.random.Generator, preset) -> dict | None:
     """One rendered eccentric lesion: areas at its centre, two-caliper and densitometric."""
-    from recon.centerline import compute_vesselness, trace_segment
-    from recon.densitometry import with_fill_ratios
-    from recon.matching import match_centerlines
+    from recon.correspond.matching import match_centerlines
+    from recon.correspond.triangulation import build_centerline_3d
+    from recon.lumen.densitometry import with_fill_ratios
     from recon.synth.elliptic_tube import render_tube
-    from recon.triangulation import build_centerline_3d
+    from recon.trace.centerline import compute_vesselness, trace_segment
 
     view_a, view_b = preset.view_a, preset.view_b
     drawn = None

@@ -1,7 +1,7 @@
 """`coronary3d bench reconstruct --suite tree`: phantom trees with bifurcation lesions.
 
 Case k has seed ``seed + k``, lesion ``TREE_LESIONS[k % 3]``
-(:func:`recon.synth.tree.make_tree_case`: the main lesion on a
+(:func:`recon.synth.tree_case.make_tree_case`: the main lesion on a
 bifurcation's shoulder, an ostial side-branch lesion, or both at one
 bifurcation; diameter stenosis drawn from :data:`STENOSIS_PCT_RANGE`)
 and, as the varied suite takes them, a Table-1 geometry
@@ -25,10 +25,10 @@ rendered images and header geometry, and is compared with the truth:
   only its thinnest, usually distal, stretch, reported apart
   (``mld_err_all_*``, every segment);
 - per bifurcation: the bifurcation angle, the three segments' %DS and the
-  Medina class, with the definitions of :mod:`recon.bifurcation` applied to
+  Medina class, with the definitions of :mod:`recon.lumen.bifurcation` applied to
   the true centerlines, diameters and undiseased tapers (the main vessel
   within the clicked segment, the branch up to its distal click); and the
-  branch's sharpest turn (:func:`recon.bifurcation.sharpest_turn_deg`) from
+  branch's sharpest turn (:func:`recon.lumen.bifurcation.sharpest_turn_deg`) from
   the join to :data:`JOIN_TURN_BEYOND_MM` past the carina, against the true
   branch's over the same stretch (a join that kinks the branch shows as an
   excess); whether the tool flagged the branch's origin as implausible
@@ -51,7 +51,8 @@ import time
 import numpy as np
 
 from recon.bench.common import parallel_map, pose_error
-from recon.bifurcation import (
+from recon.errors import CoronaryError
+from recon.lumen.bifurcation import (
     MEDINA_DS_PCT,
     BifurcationQCA,
     bifurcation_angles_deg,
@@ -59,12 +60,12 @@ from recon.bifurcation import (
     carina_s_mm,
     sharpest_turn_deg,
 )
-from recon.errors import CoronaryError
 from recon.pipeline import ReconstructionOptions
 from recon.synth.chains import CHAINS
 from recon.synth.presets import PhantomPreset
 from recon.synth.suites import TABLE1_CYCLE, random_geometry
-from recon.synth.tree import SAMPLE_STEP_MM, TREE_LESIONS, TreeCase, make_tree_case
+from recon.synth.tree import SAMPLE_STEP_MM
+from recon.synth.tree_case import TREE_LESIONS, TreeCase, make_tree_case
 from recon.tree import reconstruct_tree, tree_calibration
 from recon.types import arclength
 
@@ -103,7 +104,7 @@ def _branch_truth(tc: TreeCase, j: int) -> tuple[float, float]:
 
 
 def true_bifurcation(tc: TreeCase, j: int) -> BifurcationQCA:
-    """Bifurcation QCA (:func:`recon.bifurcation.bifurcation_qca`) of segment j's (j >= 1)
+    """Bifurcation QCA (:func:`recon.lumen.bifurcation.bifurcation_qca`) of segment j's (j >= 1)
     bifurcation on the true centerlines, diameters and tapers: the main vessel within
     the clicked segment, the branch up to its distal click."""
     truth = tc.case.truth
@@ -127,7 +128,7 @@ def _preset_name(preset: str | PhantomPreset) -> str:
 def _case(job: tuple) -> dict:
     preset, seed, lesion, chain, stenosis_pct = job
     tc = make_tree_case(preset, seed, lesion, stenosis_pct=stenosis_pct, chain=chain)
-    from recon.bench.reconstruct import case_angiograms
+    from recon.bench.common import case_angiograms
 
     a, b = case_angiograms(tc.case)
     t0 = time.perf_counter()
@@ -204,7 +205,7 @@ def _scale_free_tree_mm(X_tree: np.ndarray, case, view_b) -> float:
     projected exactly into A and into B's true pose, triangulated with A and ``view_b``,
     after the best scaling about A's source (the baseline's length is unobservable from
     two views), as `bench calibration-modes` measures a segment."""
-    from recon.bench.calibration_modes import scale_free_error_mm
+    from recon.bench.common import scale_free_error_mm
     from recon.geometry import triangulate
 
     X_rec = triangulate(case.view_a.project(X_tree), case.view_b_true.project(X_tree),

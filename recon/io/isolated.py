@@ -40,9 +40,9 @@ from recon.errors import CoronaryError
 from recon.io.limits import LimitError
 
 if TYPE_CHECKING:
-    from recon.centerline import VesselnessMap
     from recon.pipeline import Reconstruction, ReconstructionOptions
     from recon.seeds import Seeds
+    from recon.trace.centerline import VesselnessMap
     from recon.tree import TreeReconstruction
     from recon.types import Angiogram
 

@@ -102,7 +102,7 @@ def centerline_csv(rec: Reconstruction | TreeReconstruction) -> bytes:
     in seeds.json.
 
     radius_lo95_mm / radius_hi95_mm: the 95 % interval of radius_mm
-    (:mod:`recon.uncertainty`); nan when the reconstruction has no intervals.
+    (:mod:`recon.pose.uncertainty`); nan when the reconstruction has no intervals.
     diameter_mm: the measured lumen profile, nan before a branch's carina (its
     measurements start there)."""
     buf = io.StringIO()

@@ -8,7 +8,6 @@ import pytest
 import trimesh
 
 from recon.bench.reconstruct import evaluate_case
-from recon.centerline import compute_vesselness
 from recon.geometry import ViewGeometry, fundamental_matrix
 from recon.io.angiogram import load_angiogram
 from recon.io.outputs import outputs_as_bytes, write_outputs
@@ -16,6 +15,7 @@ from recon.io.seeds_file import load_seeds
 from recon.pipeline import PipelineError, ReconstructionOptions, reconstruct_pair
 from recon.seeds import Seeds
 from recon.synth import make_phantom
+from recon.trace.centerline import compute_vesselness
 
 DATA = Path(__file__).resolve().parent.parent / "data"
 

@@ -1,9 +1,12 @@
-"""The layout rules: recon is pure, only recon.io touches pydicom, highdicom, vtk and Dask,
-no module is too long."""
+"""What `lint-imports` (the contracts in pyproject.toml) cannot see: importing the pipeline
+loads no edge library at run time, even through a third-party package; no module is too long.
+
+The layout's import rules themselves (layers, edge libraries, no viewer in recon, no
+circles) are import-linter contracts, checked by `lint-imports` in .ci/run.
+"""
 
 from __future__ import annotations
 
-import ast
 import subprocess
 import sys
 from pathlib import Path
@@ -35,39 +38,6 @@ def test_importing_the_pipeline_loads_no_edge_library_nor_viser() -> None:
         [sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120
     )
     assert result.returncode == 0, result.stderr
-
-
-def _imports(tree: ast.AST) -> list[tuple[str, bool]]:
-    """(top-level package, inside a function) of every import in a module."""
-    found: list[tuple[str, bool]] = []
-
-    def visit(node: ast.AST, in_function: bool) -> None:
-        for child in ast.iter_child_nodes(node):
-            inner = in_function or isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef))
-            if isinstance(child, ast.Import):
-                found.extend((alias.name.split(".")[0], in_function) for alias in child.names)
-            elif isinstance(child, ast.ImportFrom) and child.module and child.level == 0:
-                found.append((child.module.split(".")[0], in_function))
-            visit(child, inner)
-
-    visit(tree, False)
-    return found
-
-
-# Modules of recon/ that may import the viewer, inside a function only (the
-# `view` command, and a bench that drives the viewer).
-_VIEWER_ALLOWED = ("recon/cli.py", "recon/bench/")
-
-
-@pytest.mark.parametrize("path", _py_files("recon"), ids=_rel)
-def test_edge_libraries_only_in_recon_io_and_no_viewer_in_recon(path: Path) -> None:
-    rel = _rel(path)
-    for package, in_function in _imports(ast.parse(path.read_text(encoding="utf-8"))):
-        if package in _EDGE_ONLY:
-            assert rel.startswith("recon/io/"), f"{rel} imports {package} outside recon/io/"
-        if package in ("viser", "viewer_app"):
-            allowed = package == "viewer_app" and rel.startswith(_VIEWER_ALLOWED)
-            assert allowed and in_function, f"{rel} imports {package}"
 
 
 @pytest.mark.parametrize("path", _py_files("recon", "viewer_app"), ids=_rel)

@@ -23,8 +23,8 @@ import pytest
 from scipy import ndimage as ndi
 from test_real_views import TRIM_MM, ridge_distance
 
-from recon.bifurcation import nearest_on_polyline
 from recon.io import load_angiogram, load_seeds
+from recon.lumen.bifurcation import nearest_on_polyline
 from recon.tree import reconstruct_tree
 
 DATA = Path(__file__).resolve().parents[2] / "tests" / "data"

@@ -10,16 +10,16 @@ from support import run_cli
 from vtkmodules.util.numpy_support import vtk_to_numpy
 from vtkmodules.vtkIOXML import vtkXMLPolyDataReader
 
-from recon.bench.reconstruct import case_angiograms
+from recon.bench.common import case_angiograms
 from recon.bench.tree import _branch_truth
-from recon.bifurcation import bifurcation_angles_deg, nearest_on_polyline
+from recon.correspond.triangulation import point_polyline_distance
 from recon.io.outputs import outputs_as_bytes
 from recon.io.seeds_file import save_seeds
+from recon.lumen.bifurcation import bifurcation_angles_deg, nearest_on_polyline
 from recon.pipeline import reconstruct_pair
 from recon.synth import make_phantom
-from recon.synth.tree import make_tree_case, tree_seeds
+from recon.synth.tree_case import make_tree_case, tree_seeds
 from recon.tree import reconstruct_tree
-from recon.triangulation import point_polyline_distance
 
 
 @pytest.fixture(scope="module")
@@ -136,7 +136,7 @@ def test_each_branchs_best_view_keeps_the_other_branches_off_it(tree_case):
     must not overlap: its overlap map counts them (it differs from the map of the branch
     alone, which sees only the branch crossing itself), and its best angle is at least as
     good as the branch-alone choice by that measure (foreshortening + overlap)."""
-    from recon.optimal_view import optimal_view
+    from recon.pose.optimal_view import optimal_view
 
     _, tree = tree_case
     for rec in tree.branches:
@@ -331,7 +331,7 @@ def test_a_refused_branch_trace_names_its_segment_view_and_place():
 
     from recon.io import demo_paths, load_angiogram, load_seeds
     from recon.seeds import Seeds
-    from recon.trace_error import TraceError
+    from recon.trace.trace_error import TraceError
 
     demo = demo_paths()
     a, b = load_angiogram(demo["a"]), load_angiogram(demo["b"])

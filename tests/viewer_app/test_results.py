@@ -190,7 +190,7 @@ def test_results_show_the_95_pct_interval_beside_the_value() -> None:
 def test_the_bifurcation_table_says_when_a_branch_origin_is_doubtful() -> None:
     from dataclasses import replace
 
-    from recon.bifurcation import bifurcation_qca
+    from recon.lumen.bifurcation import bifurcation_qca
 
     s = np.arange(0.0, 60.0, 0.1)
     parent = np.column_stack([s, 0 * s, 0 * s])

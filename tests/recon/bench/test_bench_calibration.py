@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from recon.bench.calibration import extra_landmarks, pose_errors, reference_poses
-from recon.calibration import CalibrationPriors, backprojection_residuals_px
+from recon.pose.calibration import CalibrationPriors, backprojection_residuals_px
 from recon.synth import make_phantom
 
 

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from recon.bench import calibration_modes as cm
+from recon.bench.common import scale_free_error_mm
 
 
 def test_the_baseline_scale_is_removed_and_nothing_else() -> None:
@@ -13,10 +14,10 @@ def test_the_baseline_scale_is_removed_and_nothing_else() -> None:
     source = np.array([0.0, -800.0, 0.0])
     X = rng.uniform(-30.0, 30.0, (50, 3))
     scaled = source + 1.02 * (X - source)
-    err, k = cm.scale_free_error_mm(scaled, X, source)
+    err, k = scale_free_error_mm(scaled, X, source)
     assert err == pytest.approx(0.0, abs=1e-9) and k == pytest.approx(1 / 1.02)
     shifted = X + np.array([0.5, 0.0, 0.0])  # a shift across the rays is an error
-    assert cm.scale_free_error_mm(shifted, X, source)[0] > 0.3
+    assert scale_free_error_mm(shifted, X, source)[0] > 0.3
 
 
 def _row(seed: int, errors: dict) -> dict:

@@ -9,7 +9,7 @@ import sys
 import pytest
 
 from recon.bench import optimal_view as bench
-from recon.optimal_view import foreshortening_pct
+from recon.pose.optimal_view import foreshortening_pct
 from recon.synth import make_phantom
 
 

@@ -13,7 +13,7 @@ from support import centerline_3d, straight
 from recon.bench.common import pose_error
 from recon.bench.reconstruct import closed_truth_volume_mm3, section_volume_mm3
 from recon.geometry import ViewGeometry
-from recon.surface import build_surface
+from recon.lumen.surface import build_surface
 from recon.synth import make_phantom
 
 BENCHES = ("centerline", "calibration", "matching", "reconstruct", "speed", "intervals",

@@ -7,10 +7,16 @@ import pytest
 from support import run_cli
 
 from recon.bench.common import pose_error
-from recon.bench.reconstruct import format_table, run
-from recon.bench.tree import STENOSIS_PCT_RANGE, _scale_free_tree_mm, tree_jobs, true_bifurcation
+from recon.bench.tree import (
+    STENOSIS_PCT_RANGE,
+    _scale_free_tree_mm,
+    format_tree,
+    run_tree,
+    tree_jobs,
+    true_bifurcation,
+)
 from recon.synth.chains import CHAINS
-from recon.synth.tree import make_tree_case
+from recon.synth.tree_case import make_tree_case
 
 KEYS = {"cases", "mld_err_mean_mm", "mld_err_sd_mm", "ref_diam_err_mean_mm",
         "bifurcation_angle_err_mean_deg", "bifurcation_angle_err_sd_deg",
@@ -19,7 +25,7 @@ KEYS = {"cases", "mld_err_mean_mm", "mld_err_sd_mm", "ref_diam_err_mean_mm",
 
 
 def test_one_tree_case_gives_every_key():
-    result = run(cases=1, seed=0, suite="tree")
+    result = run_tree(1, 0, "tree")
     assert KEYS <= set(result)
     assert result["cases"] == 1 and result["failed"] == []
     row = result["rows"][0]
@@ -32,7 +38,7 @@ def test_one_tree_case_gives_every_key():
         assert len(bif["medina_true"].split(",")) == 3
         assert 0.0 <= bif["join_turn_true_deg"] < 30.0  # the phantom's branches are smooth
     assert 0.0 <= result["medina_agreement"] <= 1.0
-    assert "Tree suite (tree): 1 cases" in format_table(result)
+    assert "Tree suite (tree): 1 cases" in format_tree(result)
 
 
 def test_the_tree_suite_is_for_bench_reconstruct_only():

@@ -66,7 +66,7 @@ def test_a_refusal_is_answered_with_a_waypoint_on_the_truth_where_it_asks(monkey
     """The simulated clinician clicks the true segment nearest the place a refusal names,
     puts that waypoint in order along the segment, and stops at a refusal that names no
     place or after ANSWER_ROUNDS waypoints."""
-    from recon.trace_error import TraceError
+    from recon.trace.trace_error import TraceError
 
     seg = np.column_stack([np.arange(0.0, 100.0, 0.1), np.full(1000, 50.0)])
     clicks = np.array([[0.0, 50.0], [60.0, 50.0], [99.9, 50.0]])
@@ -108,7 +108,7 @@ def test_click_errors_measure_the_snap_against_the_true_centre_line():
     """A click 3 px off a dark horizontal tube's centre: 3 px as clicked, near 0 snapped."""
     rows, cols = np.mgrid[0:128, 0:160].astype(float)
     image = 1.0 - 0.5 * np.clip(1.0 - ((rows - 60.0) / 4.0) ** 2, 0.0, None) ** 0.5
-    from recon.centerline import compute_vesselness
+    from recon.trace.centerline import compute_vesselness
 
     vmap = compute_vesselness(image.astype(np.float32))
     seg = np.column_stack([np.arange(20.0, 140.0, 0.1), np.full(1200, 60.0)])
@@ -137,7 +137,7 @@ def test_final_traces_are_judged_against_the_truth_and_a_silent_loss_is_counted(
     as silent only when the cross-view check named no stretch of that view."""
     from types import SimpleNamespace
 
-    from recon.consistency import Stretch
+    from recon.correspond.consistency import Stretch
     from recon.types import Centerline2D
 
     case = make_phantom("data1", 0, render=False)

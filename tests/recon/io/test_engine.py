@@ -176,7 +176,7 @@ def test_a_tree_case_is_reconstructed_whole_with_a_row_per_branch(tmp_path):
 
     from recon.io.seeds_file import save_seeds
     from recon.synth import make_phantom
-    from recon.synth.tree import tree_seeds
+    from recon.synth.tree_case import tree_seeds
 
     manifest = _manifest(tmp_path, 0, ["tree,inputs/a.dcm,inputs/b.dcm,inputs/tree.json,",
                                        "side,inputs/a.dcm,inputs/b.dcm,inputs/tree.json,1",

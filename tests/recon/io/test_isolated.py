@@ -32,11 +32,11 @@ def test_a_refused_trace_comes_back_with_its_view_and_place() -> None:
     """A TraceError from the child keeps what the viewer rings: the view and the place."""
     import numpy as np
 
-    from recon.trace_error import TraceError
+    from recon.trace.trace_error import TraceError
 
     blank = np.full((60, 60), 100.0)  # no vessel: the first click is refused
     with pytest.raises(TraceError, match=r"^view A: click 1 \(proximal end\): ") as info:
-        run_isolated("recon.centerline:trace_segment", (blank, [(10.0, 12.0), (40.0, 45.0)]))
+        run_isolated("recon.trace.centerline:trace_segment", (blank, [(10.0, 12.0), (40.0, 45.0)]))
     assert info.value.view == "A"
     np.testing.assert_allclose(info.value.near_px, (10.0, 12.0))
 

@@ -21,8 +21,8 @@ from recon.io.outputs import (
     write_outputs,
 )
 from recon.io.seeds_file import load_seeds
+from recon.lumen.surface import build_surface
 from recon.pipeline import reconstruct_pair
-from recon.surface import build_surface
 
 VIEW_A = ViewGeometry(-30.0, 0.0, 1000.0, 750.0, (0.39, 0.39), 512, 512)
 VIEW_B = ViewGeometry(30.0, 0.0, 1000.0, 750.0, (0.39, 0.39), 512, 512)
