@@ -42,9 +42,9 @@ from viewer_app.scene import LAYOUTS, ModelNodes, View
 from viewer_app.state import Autosave, Mark, MarkState, default_autosave_path
 
 if TYPE_CHECKING:
-    from recon.calibration import CalibrationResult
     from recon.io.overrides import GeometryOverrides
     from recon.pipeline import Reconstruction
+    from recon.pose.calibration import CalibrationResult
     from viewer_app.tree_view import Result
 
 __all__ = ["ViewerApp", "EXPORT_KINDS"]
@@ -376,7 +376,7 @@ class ViewerApp:
 
     def set_intensity(self, view: str, choice: str) -> None:
         """How view ``view``'s stored values are read by the next Reconstruct (lin/log/auto)."""
-        from recon.intensity import INTENSITY_CHOICES
+        from recon.trace.intensity import INTENSITY_CHOICES
 
         if choice not in INTENSITY_CHOICES:
             raise ValueError(f"intensity must be one of {', '.join(INTENSITY_CHOICES)}")
@@ -391,7 +391,7 @@ class ViewerApp:
 
     # ================================================================ marks
     def _snap(self, view: str, raw_px: FloatArray) -> tuple[FloatArray, float | None, str | None]:
-        from recon.centerline import snap_click
+        from recon.trace.centerline import snap_click
 
         try:
             vmap = self.views[view].get_vesselness()

@@ -1,5 +1,5 @@
 """Catheter calibration in the page (Geometry folder): French size, two clicks across the
-guiding catheter, and the pixel spacing field of that view filled (recon.catheter).
+guiding catheter, and the pixel spacing field of that view filled (recon.trace.catheter).
 
 While a measurement is pending the next two clicks on that view's image go here, not
 to the marks. The first edge clicked is drawn as a small yellow cross, the edges found
@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import NDArray
 
-from recon.catheter import FRENCH_RANGE, CatheterCalibration, calibrate_from_catheter
+from recon.trace.catheter import FRENCH_RANGE, CatheterCalibration, calibrate_from_catheter
 from viewer_app.scene import OVERLAY_Z
 
 if TYPE_CHECKING:
@@ -72,7 +72,7 @@ class CatheterTool:
         self.app.guard("Catheter", client, lambda: self._finish(view, french, client))
 
     def _finish(self, view: str, french: float, client: object | None) -> None:
-        from recon.intensity import POWER_OF, resolve_mapping
+        from recon.trace.intensity import POWER_OF, resolve_mapping
 
         app = self.app
         angio = app.views[view].angio

@@ -22,8 +22,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 import viser
 
-from recon.intensity import INTENSITY_CHOICES
 from recon.io import MESH_FORMATS
+from recon.trace.intensity import INTENSITY_CHOICES
 from viewer_app.plot import profile_plot
 from viewer_app.results import (
     NO_RECONSTRUCTION_TEXT,
@@ -41,8 +41,8 @@ from viewer_app.state import MODE_LABELS, MODES
 from viewer_app.tree_view import branch_heading, branch_names, is_tree
 
 if TYPE_CHECKING:
-    from recon.calibration import CalibrationResult
     from recon.pipeline import Reconstruction
+    from recon.pose.calibration import CalibrationResult
     from recon.tree import TreeReconstruction
     from viewer_app.app import ViewerApp
     from viewer_app.scene import View

@@ -16,9 +16,9 @@ import numpy as np
 from recon.geometry import MIN_VIEW_SEPARATION_DEG, view_separation_deg
 
 if TYPE_CHECKING:
-    from recon.calibration import CalibrationResult
     from recon.geometry import ViewGeometry
     from recon.pipeline import Reconstruction
+    from recon.pose.calibration import CalibrationResult
     from recon.types import Angiogram
     from viewer_app.state import MarkState
 
@@ -190,8 +190,8 @@ def lesion_measurements(profile: object, start_mm: float, end_mm: float,
     user-defined reference of 2D QCA); the sites are the lesion ends unless
     ``reference_mm`` = (proximal, distal) mm gives them. The MLD is the smallest
     smoothed diameter between the lesion ends. ``profile`` is a
-    recon.measure.LumenProfile (``s_mm``, ``diameter_smooth_mm``, (M,) arrays). Returns a
-    dict with the keys of :class:`recon.measure.Measurements` that depend on the lesion
+    recon.lumen.measure.LumenProfile (``s_mm``, ``diameter_smooth_mm``, (M,) arrays). Returns a
+    dict with the keys of :class:`recon.lumen.measure.Measurements` that depend on the lesion
     ends, plus ``proximal_reference_mm``, ``distal_reference_mm`` and the sites
     ``proximal_reference_s_mm``, ``distal_reference_s_mm``.
     """

@@ -181,8 +181,8 @@ class View:
         return np.array([col, row])
 
     def get_vesselness(self) -> object:
-        """Vesselness of the current frame, computed once (recon.centerline)."""
-        from recon.centerline import compute_vesselness
+        """Vesselness of the current frame, computed once (recon.trace.centerline)."""
+        from recon.trace.centerline import compute_vesselness
 
         with self.vesselness_lock:
             if self.vesselness is None:
@@ -531,7 +531,7 @@ def draw_flagged(scene: viser.SceneApi, views: Mapping[str, View], rec: Reconstr
 
 def draw_catheters(scene: viser.SceneApi, views: Mapping[str, View], rec: Reconstruction
                    ) -> int:
-    """The guiding catheter found in each view (recon.guide_catheter), dashed in
+    """The guiding catheter found in each view (recon.trace.guide_catheter), dashed in
     CATHETER_COLOR and labelled, so the clinician sees what the trace was kept off; a
     tree's first branch carries them. Returns the number drawn."""
     part = tuple(getattr(rec, "branches", (rec,)))[0]
@@ -567,7 +567,7 @@ REFUSAL_MIN_PX = 10.0
 def draw_refusal(scene: viser.SceneApi, views: Mapping[str, View], error: object | None
                  ) -> bool:
     """A ring in FLAGGED_COLOR round the place a refused trace names (a
-    :class:`~recon.trace_error.TraceError`'s ``view`` and ``near_px``: where a waypoint
+    :class:`~recon.trace.trace_error.TraceError`'s ``view`` and ``near_px``: where a waypoint
     would help), labelled, on that view; ``error`` None removes it. An error that names
     no place changes nothing. Returns whether a place was drawn."""
     if error is None:
