@@ -13,7 +13,6 @@ from __future__ import annotations
 import contextlib
 import io
 import logging
-import re
 import tempfile
 import threading
 import time
@@ -30,8 +29,9 @@ from recon.errors import LoadError, OutputError
 from recon.io import demo_paths, load_angiogram, load_seeds, save_seeds
 from recon.seeds import Seeds
 from recon.types import Angiogram
-from viewer_app import scene, tree_view
+from viewer_app import opening, scene, tree_view
 from viewer_app.access import PATCHED_VISER_VERSION, FileAccess, ServerGuard, guarded_serve
+from viewer_app.autosave import Autosave, default_autosave_path
 from viewer_app.camera import PageCameras
 from viewer_app.catheter import CatheterTool
 from viewer_app.exports import EXPORT_KINDS, export_bytes, export_name
@@ -39,7 +39,7 @@ from viewer_app.panels import Panels, build_panels
 from viewer_app.progress import loading_notes
 from viewer_app.results import close_views_warning
 from viewer_app.scene import LAYOUTS, ModelNodes, View
-from viewer_app.state import Autosave, Mark, MarkState, default_autosave_path
+from viewer_app.state import Mark, MarkState
 
 if TYPE_CHECKING:
     from recon.io.overrides import GeometryOverrides
@@ -119,7 +119,6 @@ class ViewerApp:
         self.model: ModelNodes | None = None
         self.lesion: dict[str, float] | None = None  # lesion ends set by hand (mm), if any
         self.pair_warning: str | None = None  # views too similar to fix depth
-        self.catheter = CatheterTool(self)  # the Geometry folder's catheter calibration
 
         angio_a = load_angiogram(path_a, frame=frame_a, overrides=overrides_a)
         angio_b = load_angiogram(path_b, frame=frame_b, overrides=overrides_b)
@@ -144,6 +143,9 @@ class ViewerApp:
         self.server.on_client_connect(self._greet)
         self._setup_page()
         self.panels: Panels = build_panels(self.server.gui, self)
+        # the Geometry folder's catheter calibration
+        self.catheter = CatheterTool(self.server.scene, self.panels.geometry, self.notify,
+                                     self.guard)
         self._set_pair(angio_a, angio_b, Path(path_a).name, Path(path_b).name, seeds, seeds_path)
 
     # ================================================================ page
@@ -287,14 +289,11 @@ class ViewerApp:
 
         def run() -> bool:
             try:
-                angio_a = load_angiogram(self.access.readable(path_a, "file A"), frame=frame_a,
-                                         overrides=overrides_a)
-                angio_b = load_angiogram(self.access.readable(path_b, "file B"), frame=frame_b,
-                                         overrides=overrides_b)
+                angio_a, angio_b = opening.read_pair(self.access, (path_a, path_b),
+                                                     (frame_a, frame_b), (overrides_a, overrides_b))
             except LoadError as exc:
                 if "missing" in str(exc) and self._offer_geometry(path_a, path_b, client):
-                    raise LoadError(re.sub(r"give --[\w-]+ or a geometry JSON",
-                                           "enter it under Geometry", str(exc))) from None
+                    raise opening.page_wording(exc) from None
                 raise
             with self._lock:
                 self._autosave()
@@ -308,15 +307,10 @@ class ViewerApp:
 
     def _offer_geometry(self, path_a: str, path_b: str, client: object | None) -> bool:
         """Fill the Geometry folder from the two files' headers (missing values empty);
-        False when a file cannot be read at all."""
-        from recon.io.describe import describe_file
-
-        headers = {}
-        for key, path in (("a", path_a), ("b", path_b)):
-            try:
-                headers[key] = describe_file(path)["geometry"]
-            except LoadError:
-                return False  # unreadable: the error notification says why
+        False when a file cannot be read at all (the error notification says why)."""
+        headers = opening.header_geometries((path_a, path_b))
+        if headers is None:
+            return False
         self.pending_pair = (path_a, path_b)
         self.panels.show_geometry(headers, {k: Path(p).name for k, p in
                                             (("a", path_a), ("b", path_b))})
@@ -329,19 +323,11 @@ class ViewerApp:
         """Open the pending pair (or reopen the current one) with typed geometry values
         (view -> key -> text, "" keeps the header's); a replaced header value is named in
         a warning."""
-        from recon.io.describe import describe_file
-        from recon.io.overrides import overrides_from_entries
 
         def run() -> bool:
             pair = self.pending_pair or (self.views["a"].angio.path,
                                          self.views["b"].angio.path)
-            overrides, warnings = {}, []
-            for key, path in zip(("a", "b"), pair, strict=True):
-                header = describe_file(path)["geometry"]
-                ov, replaced = overrides_from_entries(
-                    entries[key], header, source=f"Geometry {key.upper()} ({Path(path).name})")
-                overrides[key] = ov
-                warnings += [f"{key.upper()} {Path(path).name}: {r}" for r in replaced]
+            overrides, warnings = opening.typed_overrides(pair, entries)
             ok = self.open_pair(pair[0], pair[1], client=client, overrides_a=overrides["a"],
                                 overrides_b=overrides["b"])
             for w in warnings if ok else ():
@@ -353,14 +339,16 @@ class ViewerApp:
     def open_upload(self, view: str, filename: str, content: bytes,
                     client: object | None = None) -> bool:
         """Replace one view by an uploaded file (kept in a private temporary folder)."""
-        safe = Path(filename).name or f"upload_{view}.dcm"
-        folder = Path(self._tmpdir.name) / f"{view}-{time.time_ns()}"
-        folder.mkdir(parents=True)
-        path = folder / safe
-        path.write_bytes(content)
+        path = opening.keep_upload(Path(self._tmpdir.name), view, filename, content)
         other = self.views["b" if view == "a" else "a"].angio.path
         pa, pb = (str(path), other) if view == "a" else (other, str(path))
         return self.open_pair(pa, pb, client=client)
+
+    def measure_catheter(self, view: str, french_text: str,
+                         client: object | None = None) -> bool:
+        """The next two clicks in ``view`` measure the guiding catheter of the French size
+        typed (:class:`viewer_app.catheter.CatheterTool`)."""
+        return self.catheter.start(view, french_text, client=client)
 
     def set_frame(self, view: str, index: int) -> None:
         """Show frame ``index`` (0-based) of a cine run; marks stay, vesselness is redone."""
@@ -422,7 +410,7 @@ class ViewerApp:
 
     def _click(self, view: str, col: float, row: float, client: object | None) -> Mark | None:
         if self.catheter.active:  # two clicks across the catheter, not marks
-            self.catheter.click(view, col, row, client)
+            self.catheter.click(self.views[view], col, row, self.intensity[view], client)
             return None
         t0 = time.perf_counter()
         with self._lock:
@@ -456,8 +444,7 @@ class ViewerApp:
             shown = tree_view.branch_names(rec) if tree_view.is_tree(rec) else []
             if self.model is not None and name in shown:
                 self.shown_branch, self.lesion = shown.index(name), None
-                tree_view.show_branch(self.server.scene, self.views, self.panels, rec,
-                                      self.model, self.shown_branch)
+                self._show_branch(rec, self.shown_branch)
 
     def _edit_marks(self, what: str, client: object | None, change: Callable[[], object]
                     ) -> object:
@@ -473,8 +460,7 @@ class ViewerApp:
                     else tree_view.renamed(self.reconstruction, before, self.state.segment_names)
                 if rec is not None and self.model is not None:
                     self.reconstruction = rec
-                    tree_view.show_branch(self.server.scene, self.views, self.panels, rec,
-                                          self.model, self.shown_branch, tree_view.is_tree(rec))
+                    self._show_branch(rec, self.shown_branch, tree_view.is_tree(rec))
                 self._redraw_marks()
                 self._autosave()
                 return value
@@ -647,10 +633,20 @@ class ViewerApp:
         tree's: each branch in its colour, the current segment's shown), the results
         table and the profile; the page shows the angiograms and the model."""
         current = self.state.segment_names[self.state.current_segment]
-        self.model, self.shown_branch = tree_view.show_result(
-            self.server.scene, self.views, self.panels, rec, current)
+        self.model, self.shown_branch = tree_view.draw_result(
+            self.server.scene, self.views, rec, current)
+        self._show_branch(rec, self.shown_branch, redraw=False)
         self.lesion = None
         self.set_layout("Angiograms + 3D")
+
+    def _show_branch(self, rec: Result, index: int, redraw: bool = True) -> None:
+        """The results panel on branch ``index`` (its table, chart and lesion sliders; a
+        tree's branch line and bifurcations) and, with ``redraw``, that branch highlighted
+        on the images and the model."""
+        if redraw:
+            tree_view.highlight_branch(self.server.scene, self.views, rec, self.model, index)
+        self.panels.show_reconstruction(tree_view.branches_of(rec)[index])
+        self.panels.show_tree(rec, index)
 
     @property
     def branch(self) -> Reconstruction | None:

@@ -17,7 +17,11 @@ from recon.trace.catheter import FRENCH_RANGE, CatheterCalibration, calibrate_fr
 from viewer_app.scene import OVERLAY_Z
 
 if TYPE_CHECKING:
-    from viewer_app.app import ViewerApp
+    import viser
+
+    from viewer_app.commands import Guard, Notify
+    from viewer_app.panels import GeometryPanel
+    from viewer_app.scene import View
 
 __all__ = ["CatheterTool"]
 
@@ -25,10 +29,20 @@ EDGE_COLOR = (255, 210, 0)
 
 
 class CatheterTool:
-    """A pending catheter measurement of one view and the last result."""
+    """A pending catheter measurement of one view and the last result.
 
-    def __init__(self, app: ViewerApp) -> None:
-        self.app = app
+    Parameters
+    ----------
+    scene : the page's scene (the edges are drawn over the image).
+    panel : the Geometry folder (its SID / SOD fields are read, its pixel spacing field
+        filled, its catheter note kept up to date).
+    notify, guard : the viewer's notifications and error guard.
+    """
+
+    def __init__(self, scene: viser.SceneApi, panel: GeometryPanel, notify: Notify,
+                 guard: Guard) -> None:
+        self.scene, self.panel = scene, panel
+        self.notify, self.guard = notify, guard
         self.pending: tuple[str, float] | None = None  # (view, French size)
         self.clicks: list[tuple[float, float]] = []
         self.result: CatheterCalibration | None = None
@@ -45,42 +59,45 @@ class CatheterTool:
         except ValueError:
             french = float("nan")
         if not FRENCH_RANGE[0] <= french <= FRENCH_RANGE[1]:
-            self.app.notify("Catheter", f"catheter size {french_text!r}: give the French size, "
+            self.notify("Catheter", f"catheter size {french_text!r}: give the French size, "
                             f"{FRENCH_RANGE[0]:g}-{FRENCH_RANGE[1]:g} F", "error", client)
             return False
         self.pending, self.clicks = (view, french), []
         self._note(f"Waiting: click once on each edge of the {french:g} F catheter in "
                    f"**{view.upper()}**, across it.")
-        self.app.server.scene.remove_by_name(f"/over_{view}/catheter")
+        self.scene.remove_by_name(f"/over_{view}/catheter")
         return True
 
-    def click(self, view: str, col: float, row: float, client: object | None = None) -> None:
-        """One click of the pending measurement (a click in the other view is refused)."""
+    def click(self, v: View, col: float, row: float, intensity: str,
+              client: object | None = None) -> None:
+        """One click of the pending measurement on view ``v`` (a click in the other view is
+        refused); ``intensity`` is that view's stored-values choice (lin, log or auto)."""
+        view = v.key
         want = self.pending[0] if self.pending is not None else view
         if view != want:
-            self.app.notify("Catheter", f"the catheter is measured in {want.upper()}: click "
+            self.notify("Catheter", f"the catheter is measured in {want.upper()}: click "
                             f"its edges there", "error", client)
             return
         self.clicks.append((float(col), float(row)))
         if len(self.clicks) < 2:
             self._note(f"First edge placed in **{view.upper()}** (the cross); now click the "
                        f"other edge of the {self.pending[1]:g} F catheter.")
-            self._draw_first_edge(view, np.array([col, row], dtype=float))
+            self._draw_first_edge(v, np.array([col, row], dtype=float))
             return
-        view, french = self.pending
+        french = self.pending[1]
         self.pending = None
-        self.app.guard("Catheter", client, lambda: self._finish(view, french, client))
+        self.guard("Catheter", client, lambda: self._finish(v, french, intensity, client))
 
-    def _finish(self, view: str, french: float, client: object | None) -> None:
+    def _finish(self, v: View, french: float, intensity: str, client: object | None) -> None:
         from recon.trace.intensity import POWER_OF, resolve_mapping
 
-        app = self.app
-        angio = app.views[view].angio
-        fields = app.panels.geometry.fields[view]
+        view = v.key
+        angio = v.angio
+        fields = self.panel.fields[view]
         sid = _number(fields["sid_mm"].value, angio.geometry.sid_mm)
         sod = _number(fields["sod_mm"].value, angio.geometry.sod_mm)
         mapping = resolve_mapping(angio.image, angio.info.get("pixel_intensity_relationship"),
-                                  app.intensity[view])
+                                  intensity)
         cal = calibrate_from_catheter(angio.image, *self.clicks, french=french, sid_mm=sid,
                                       sod_mm=sod, power=POWER_OF[mapping.mapping])
         self.result = cal
@@ -94,29 +111,26 @@ class CatheterTool:
             f"file opened with {header:.4f} mm). A contrast-filled catheter with a faint wall "
             "reads near its inner diameter (spacing up to ~10 % large). Press **Open with "
             "this geometry** to use it.")
-        scene = app.server.scene
-        v = app.views[view]
         # each edge as a tick along the catheter, 1.5 widths long, so both are seen
         e0, e1 = cal.edges_px
         along = np.array([-(e1 - e0)[1], (e1 - e0)[0]]) * 0.75
         ticks = np.array([[e - along, e + along] for e in (e0, e1)])
         seg = v.local_from_px(ticks.reshape(-1, 2), z=1.5 * OVERLAY_Z).reshape(2, 2, 3).astype(
             np.float32)
-        scene.add_line_segments(f"/over_{view}/catheter", seg, EDGE_COLOR, thickness=3.0,
-                                thickness_units="screen")
-        app.notify("Catheter", f"pixel spacing {view.upper()} {cal.pixel_spacing_mm:.4f} mm "
-                   "(in the Geometry folder)", "success", client)
+        self.scene.add_line_segments(f"/over_{view}/catheter", seg, EDGE_COLOR, thickness=3.0,
+                                     thickness_units="screen")
+        self.notify("Catheter", f"pixel spacing {view.upper()} {cal.pixel_spacing_mm:.4f} mm "
+                    "(in the Geometry folder)", "success", client)
 
-    def _draw_first_edge(self, view: str, edge_px: NDArray[np.float64]) -> None:
+    def _draw_first_edge(self, v: View, edge_px: NDArray[np.float64]) -> None:
         """A cross (16 image px, wider than the catheter) where the first edge was clicked."""
-        v = self.app.views[view]
         arm = np.array([[-8.0, 0.0], [8.0, 0.0], [0.0, -8.0], [0.0, 8.0]]) + edge_px
         seg = v.local_from_px(arm, z=1.5 * OVERLAY_Z).reshape(2, 2, 3).astype(np.float32)
-        self.app.server.scene.add_line_segments(f"/over_{view}/catheter", seg, EDGE_COLOR,
-                                                thickness=3.0, thickness_units="screen")
+        self.scene.add_line_segments(f"/over_{v.key}/catheter", seg, EDGE_COLOR,
+                                     thickness=3.0, thickness_units="screen")
 
     def _note(self, text: str) -> None:
-        self.app.panels.geometry.catheter_note.content = text
+        self.panel.catheter_note.content = text
 
 
 def _number(text: str, fallback: float) -> float:

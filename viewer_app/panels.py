@@ -2,9 +2,10 @@
 
 Each panel is a small dataclass whose fields are the viser handles of one
 folder of the control panel; the function that builds it also wires each
-widget's callback where the widget is made. Callbacks only call
-:class:`viewer_app.app.ViewerApp`'s public command methods; the app, in
-turn, shows its state through the ``Panels.show_*`` methods.
+widget's callback where the widget is made. Callbacks only call the viewer's
+commands (:class:`viewer_app.commands.PageCommands`, which the app provides;
+this module never imports the app); the app, in turn, shows its state through
+the ``Panels.show_*`` methods.
 
 Widgets that mirror the state (frame, window, segment, selected mark) are
 set from Python inside :meth:`Refreshing.during`, and their callbacks then
@@ -24,6 +25,7 @@ import viser
 
 from recon.io import MESH_FORMATS
 from recon.trace.intensity import INTENSITY_CHOICES
+from viewer_app.commands import PageCommands
 from viewer_app.plot import profile_plot
 from viewer_app.results import (
     NO_RECONSTRUCTION_TEXT,
@@ -44,7 +46,6 @@ if TYPE_CHECKING:
     from recon.pipeline import Reconstruction
     from recon.pose.calibration import CalibrationResult
     from recon.tree import TreeReconstruction
-    from viewer_app.app import ViewerApp
     from viewer_app.scene import View
     from viewer_app.state import MarkState
 
@@ -335,7 +336,7 @@ def slider_range_mm(s_mm: np.ndarray) -> tuple[float, float]:
     return round(lo, 1), round(max(hi, lo + 0.1), 1)
 
 
-def build_panels(gui: viser.GuiApi, app: ViewerApp) -> Panels:
+def build_panels(gui: viser.GuiApi, app: PageCommands) -> Panels:
     """Add every folder to the control panel, in order, with its callbacks."""
     refreshing = Refreshing()
     marks = _marks_panel(gui, app, refreshing)  # the workflow first
@@ -349,7 +350,7 @@ def build_panels(gui: viser.GuiApi, app: ViewerApp) -> Panels:
                   calibrate=calibrate, results=results, export=export, refreshing=refreshing)
 
 
-def _case_panel(gui: viser.GuiApi, app: ViewerApp, refreshing: Refreshing) -> CasePanel:
+def _case_panel(gui: viser.GuiApi, app: PageCommands, refreshing: Refreshing) -> CasePanel:
     with gui.add_folder("Case"):
         info = gui.add_markdown("")
         frames = {key: _frame_slider(gui, app, refreshing, key) for key in VIEW_KEYS}
@@ -382,7 +383,7 @@ def _case_panel(gui: viser.GuiApi, app: ViewerApp, refreshing: Refreshing) -> Ca
 
 
 def _frame_slider(
-    gui: viser.GuiApi, app: ViewerApp, refreshing: Refreshing, key: str
+    gui: viser.GuiApi, app: PageCommands, refreshing: Refreshing, key: str
 ) -> viser.GuiSliderHandle:
     slider = gui.add_slider(f"Frame {key.upper()}", 0, 1, 1, 0, visible=False)
 
@@ -395,7 +396,7 @@ def _frame_slider(
     return slider
 
 
-def _upload_button(gui: viser.GuiApi, app: ViewerApp, key: str) -> viser.GuiUploadButtonHandle:
+def _upload_button(gui: viser.GuiApi, app: PageCommands, key: str) -> viser.GuiUploadButtonHandle:
     upload = gui.add_upload_button(f"Upload {key.upper()}", icon=viser.Icon.UPLOAD)
 
     @upload.on_upload
@@ -407,7 +408,7 @@ def _upload_button(gui: viser.GuiApi, app: ViewerApp, key: str) -> viser.GuiUplo
 
 
 def _window_sliders(
-    gui: viser.GuiApi, app: ViewerApp, refreshing: Refreshing, key: str
+    gui: viser.GuiApi, app: PageCommands, refreshing: Refreshing, key: str
 ) -> tuple[viser.GuiSliderHandle, viser.GuiSliderHandle]:
     level = gui.add_slider(f"Level {key.upper()}", 0.0, 1.0, 1.0, 0.5)
     width = gui.add_slider(f"Width {key.upper()}", 1.0, 2.0, 1.0, 1.0)
@@ -422,7 +423,7 @@ def _window_sliders(
     return level, width
 
 
-def _intensity_dropdown(gui: viser.GuiApi, app: ViewerApp, key: str) -> viser.GuiDropdownHandle:
+def _intensity_dropdown(gui: viser.GuiApi, app: PageCommands, key: str) -> viser.GuiDropdownHandle:
     dropdown = gui.add_dropdown(f"Values {key.upper()}", list(INTENSITY_CHOICES),
                                 initial_value="auto")
 
@@ -433,7 +434,7 @@ def _intensity_dropdown(gui: viser.GuiApi, app: ViewerApp, key: str) -> viser.Gu
     return dropdown
 
 
-def _marks_panel(gui: viser.GuiApi, app: ViewerApp, refreshing: Refreshing) -> MarksPanel:
+def _marks_panel(gui: viser.GuiApi, app: PageCommands, refreshing: Refreshing) -> MarksPanel:
     label_to_mode = {v: k for k, v in MODE_LABELS.items()}
     # The mode, segment and selection widgets mirror the state. Setting them from
     # Python fires these callbacks later on viser's event loop (client None), when
@@ -511,7 +512,7 @@ GEOMETRY_WORDS = {"sid_mm": "SID (mm)", "sod_mm": "SOD (mm)",
                   "pixel_spacing_mm": "pixel spacing (mm)"}
 
 
-def _geometry_panel(gui: viser.GuiApi, app: ViewerApp) -> GeometryPanel:
+def _geometry_panel(gui: viser.GuiApi, app: PageCommands) -> GeometryPanel:
     with gui.add_folder("Geometry", expand_by_default=False):
         note = gui.add_markdown("")
         fields = {view: {key: gui.add_text(f"{view.upper()} {word}", "")
@@ -529,7 +530,7 @@ def _geometry_panel(gui: viser.GuiApi, app: ViewerApp) -> GeometryPanel:
 
     @catheter.on_click
     def _(event: viser.GuiEvent) -> None:
-        app.catheter.start(str(catheter_view.value).lower(), str(french.value),
+        app.measure_catheter(str(catheter_view.value).lower(), str(french.value),
                            client=event.client)
 
     @apply.on_click
@@ -539,7 +540,7 @@ def _geometry_panel(gui: viser.GuiApi, app: ViewerApp) -> GeometryPanel:
     return panel
 
 
-def _seeds_panel(gui: viser.GuiApi, app: ViewerApp) -> SeedsPanel:
+def _seeds_panel(gui: viser.GuiApi, app: PageCommands) -> SeedsPanel:
     with gui.add_folder("Seeds file", expand_by_default=False):
         path = gui.add_text("Seeds file", "")
         load = gui.add_button("Load seeds from path")
@@ -571,7 +572,7 @@ def _seeds_panel(gui: viser.GuiApi, app: ViewerApp) -> SeedsPanel:
     return SeedsPanel(path=path, load=load, save=save, upload=upload)
 
 
-def _calibrate_panel(gui: viser.GuiApi, app: ViewerApp) -> CalibratePanel:
+def _calibrate_panel(gui: viser.GuiApi, app: PageCommands) -> CalibratePanel:
     with gui.add_folder("Calibrate"):
         button = gui.add_button("Calibrate (PALM)", icon=viser.Icon.TARGET)
 
@@ -583,7 +584,7 @@ def _calibrate_panel(gui: viser.GuiApi, app: ViewerApp) -> CalibratePanel:
     return CalibratePanel(button=button, markdown=markdown)
 
 
-def _results_panel(gui: viser.GuiApi, app: ViewerApp, refreshing: Refreshing) -> ResultsPanel:
+def _results_panel(gui: viser.GuiApi, app: PageCommands, refreshing: Refreshing) -> ResultsPanel:
     with gui.add_folder("Reconstruct"):
         reconstruct = gui.add_button("Reconstruct", icon=viser.Icon.PLAYER_PLAY, color="green")
 
@@ -641,7 +642,7 @@ def _results_panel(gui: viser.GuiApi, app: ViewerApp, refreshing: Refreshing) ->
                         markdown=markdown)
 
 
-def _export_panel(gui: viser.GuiApi, app: ViewerApp) -> ExportPanel:
+def _export_panel(gui: viser.GuiApi, app: PageCommands) -> ExportPanel:
     with gui.add_folder("Export"):
         mesh_format = gui.add_dropdown("Mesh format", list(MESH_FORMATS))
         mesh = gui.add_button("Download mesh", icon=viser.Icon.DOWNLOAD)
@@ -658,7 +659,7 @@ def _export_panel(gui: viser.GuiApi, app: ViewerApp) -> ExportPanel:
                        centerline_vtp=buttons[1], report_json=buttons[2], seeds_json=buttons[3])
 
 
-def _download_button(gui: viser.GuiApi, app: ViewerApp, label: str,
+def _download_button(gui: viser.GuiApi, app: PageCommands, label: str,
                      kind: str) -> viser.GuiButtonHandle:
     button = gui.add_button(label, icon=viser.Icon.DOWNLOAD)
 

@@ -1,8 +1,9 @@
-"""The viewer's state without any GUI: marks, modes, undo, seeds, epipolar lines, autosave.
+"""The viewer's state without any GUI: marks, modes, undo, seeds, epipolar lines.
 
 Nothing here imports viser; :mod:`viewer_app.app` wires this state to the
-browser. Pixel coordinates follow the project's C-arm convention: (col, row),
-0-based, (0, 0) the centre of the top-left pixel.
+browser and autosaves it (:mod:`viewer_app.autosave` writes :meth:`MarkState.to_dict`).
+Pixel coordinates follow the project's C-arm convention: (col, row), 0-based, (0, 0)
+the centre of the top-left pixel.
 
 A clinician places marks in a *mode*:
 
@@ -35,15 +36,14 @@ from numpy.typing import ArrayLike, NDArray
 
 from recon.geometry import ViewGeometry, epipolar_lines
 from recon.seeds import MAX_NAME_CHARS, Feature, Seeds, Segment, seeds_from_dict
+from viewer_app.saved_names import read_names
 
 __all__ = [
     "MODES",
     "MODE_LABELS",
     "Mark",
     "MarkState",
-    "Autosave",
     "clip_line_to_image",
-    "default_autosave_path",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -684,10 +684,3 @@ def _mark_or_none(entry: object) -> Mark | None:
         return None
     return mark
 
-
-# The autosave lives in viewer_app.autosave; its names stay importable from here.
-from viewer_app.autosave import (  # noqa: E402
-    Autosave,
-    default_autosave_path,
-    read_names,
-)

@@ -47,7 +47,6 @@ if TYPE_CHECKING:
     from recon.pipeline import Reconstruction
     from recon.seeds import Seeds
     from recon.tree import TreeReconstruction
-    from viewer_app.panels import Panels
     from viewer_app.state import MarkState
 
     Result = Reconstruction | TreeReconstruction
@@ -58,6 +57,7 @@ __all__ = [
     "branch_heading",
     "branch_names",
     "branches_of",
+    "draw_result",
     "draw_tree",
     "highlight_branch",
     "is_tree",
@@ -66,8 +66,6 @@ __all__ = [
     "renamed",
     "run_reconstruction",
     "seeds_for_run",
-    "show_branch",
-    "show_result",
     "summary_text",
 ]
 
@@ -195,12 +193,12 @@ def branch_heading(result: Result, shown: int) -> str:
             f"under **Branch** above (or Segment, in Marks): {others}.")
 
 
-def show_result(scene: viser.SceneApi, views: Mapping[str, View], panels: Panels,
-                result: Result, current: str) -> tuple[ModelNodes, int]:
+def draw_result(scene: viser.SceneApi, views: Mapping[str, View], result: Result,
+                current: str) -> tuple[ModelNodes, int]:
     """Draw a new result in place of the last (a tree branch by branch, else the one
-    segment as scene.draw_reconstruction does) and fill the results panel with the branch
-    of the segment called ``current`` (the first branch if it was not reconstructed).
-    Returns the model's nodes and the index of the branch shown."""
+    segment as scene.draw_reconstruction does), the branch of the segment called
+    ``current`` shown (the first branch if it was not reconstructed). Returns the model's
+    nodes and the index of the branch shown; the app fills the results panel."""
     clear_results(scene, views)
     names = branch_names(result)
     shown = names.index(current) if current in names else 0
@@ -208,18 +206,7 @@ def show_result(scene: viser.SceneApi, views: Mapping[str, View], panels: Panels
         model = draw_tree(scene, views, result, shown)
     else:
         model = draw_reconstruction(scene, views, result)
-    show_branch(scene, views, panels, result, model, shown, redraw=False)
     return model, shown
-
-
-def show_branch(scene: viser.SceneApi, views: Mapping[str, View], panels: Panels,
-                result: Result, model: ModelNodes, index: int, redraw: bool = True) -> None:
-    """The results panel on branch ``index`` (its table, chart and lesion sliders; a
-    tree's branch line and bifurcations) and, with ``redraw``, that branch highlighted."""
-    if redraw:
-        highlight_branch(scene, views, result, model, index)
-    panels.show_reconstruction(branches_of(result)[index])
-    panels.show_tree(result, index)
 
 
 def name_place(end_xy: NDArray[np.float64], name: str, marks_xyz: NDArray

@@ -72,7 +72,7 @@ def test_a_damaged_autosave_does_not_stop_the_viewer_and_is_announced(
 def test_coronary3d_view_starts_with_a_deeply_nested_autosave(
     demo_case: dict[str, Path], tmp_path: Path, monkeypatch: pytest.MonkeyPatch, start_view
 ) -> None:
-    from viewer_app.state import default_autosave_path
+    from viewer_app.autosave import default_autosave_path
 
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
     path = default_autosave_path(demo_case["a"], demo_case["b"])

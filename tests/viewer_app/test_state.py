@@ -11,7 +11,8 @@ import pytest
 
 from recon.geometry import ViewGeometry, epipolar_lines
 from recon.seeds import Feature, Seeds, Segment, seeds_from_dict
-from viewer_app.state import Autosave, MarkState, clip_line_to_image
+from viewer_app.autosave import Autosave
+from viewer_app.state import MarkState, clip_line_to_image
 
 VIEW_A = ViewGeometry(-30.0, 20.0, 1000.0, 750.0, (0.3, 0.3), 400, 500)
 VIEW_B = ViewGeometry(35.0, 15.0, 1000.0, 750.0, (0.3, 0.3), 400, 500)
