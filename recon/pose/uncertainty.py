@@ -411,6 +411,8 @@ class MeasurementIntervals:
     radius_error : the 2D radius error model used (JSON-ready figures).
     flagged_mm : per view (A, B), the [start, end] mm stretches drawn under the
         "that view is wrong there" hypothesis too.
+    profiles : each draw's lumen profile as measured (:class:`recon.lumen.measure.LumenProfile`;
+        the FFR's interval, :mod:`recon.lumen.ffr`, is computed over them).
     """
 
     ci95: dict[str, tuple[float, float]]
@@ -420,6 +422,7 @@ class MeasurementIntervals:
     lesion_found_fraction: float
     radius_error: dict
     flagged_mm: list = field(default_factory=list)
+    profiles: tuple = ()
 
 
 def measurement_intervals(
@@ -540,9 +543,11 @@ def measurement_intervals(
     found = 0
     keep = (np.ones(len(s0), dtype=bool) if measure_from_s_mm is None
             else s0 >= measure_from_s_mm)
+    profiles = []
     for cl, area in zip(draws, areas, strict=False):
         s_kept = cl.s_mm[keep] - cl.s_mm[keep][0] + s0[keep][0]  # arc lengths as reported
-        m = measure_lumen(lumen_profile(s_kept, area[keep]))
+        profiles.append(lumen_profile(s_kept, area[keep]))
+        m = measure_lumen(profiles[-1])
         found += m.has_lesion
         for key, v in m.to_dict().items():
             if key != "has_lesion":
@@ -575,6 +580,7 @@ def measurement_intervals(
             "common_sd_px": COMMON_RADIUS_SD_PX,
         },
         flagged_mm=[[[float(s0[i]), float(s0[j - 1])] for i, j in f] for f in flags],
+        profiles=tuple(profiles),
     )
 
 
