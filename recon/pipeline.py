@@ -45,6 +45,7 @@ from recon.lumen import (
     measure_lumen,
     with_fill_ratios,
 )
+from recon.lumen.ffr import FFRModel, FFRResult, vessel_ffr
 from recon.pose import (
     CORRECTIONS,
     CalibrationResult,
@@ -120,6 +121,9 @@ class ReconstructionOptions:
         B's rig, or the full correction), "header" (B stays at its header pose) or
         "curves" (the full correction from the clicks and the two traced curves
         jointly, :func:`recon.pose.calibration_curves.calibrate_with_curves`).
+    aortic_pressure_mmhg, ffr_velocity_m_s, ffr_split_exponent : the FFR model's mean
+        aortic pressure, healthy hyperemic velocity and bifurcation flow-split exponent
+        (:class:`recon.lumen.ffr.FFRModel`; its defaults).
         "supported" keeps good real headers (tests/recon/test_real_views.py) but its
         translation-only choice costs accuracy where the header is off in rotation
         too, as on the phantoms (docs/benchmarks.md); so it is not the default yet.
@@ -135,6 +139,9 @@ class ReconstructionOptions:
     intensity_b: str = "auto"
     allow_close_views: bool = False
     calibration: str = "full"
+    aortic_pressure_mmhg: float = FFRModel.aortic_pressure_mmhg
+    ffr_velocity_m_s: float = FFRModel.velocity_m_s
+    ffr_split_exponent: float = FFRModel.split_exponent
 
 
 @dataclass(frozen=True, eq=False)
@@ -167,6 +174,8 @@ class Reconstruction:
     # 95 % intervals of the measurements and the radius (recon.pose.uncertainty); None when
     # the calibration carries no posterior (self-calibration)
     intervals: MeasurementIntervals | None = None
+    # FFR along the segment (recon.lumen.ffr; a model estimate for research), or None
+    ffr: FFRResult | None = None
 
     def report(self) -> dict:
         """JSON-ready report: inputs, geometry, calibration, matching, measurements, timings."""
@@ -228,11 +237,12 @@ class Reconstruction:
                 "watertight": bool(self.surface.mesh.is_watertight),
                 "volume_mm3": float(self.surface.mesh.volume),
             },
-            "measurements": self.measurements.to_dict(),
+            "measurements": {**self.measurements.to_dict(), **_ffr_value(self.ffr)},
             "measurements_ci95": (
-                {k: list(v) for k, v in self.intervals.ci95.items()}
+                {k: list(v) for k, v in self.intervals.ci95.items()} | _ffr_ci95(self.ffr)
                 if self.intervals is not None else None
             ),
+            "ffr": self.ffr.to_dict() if self.ffr is not None else None,
             "uncertainty": _uncertainty_report(self.intervals),
             # how each view's stored values were taken to relate to attenuation, and why
             "intensity": {
@@ -455,6 +465,14 @@ def reconstruct_pair(
                                           measurements, flagged_a=consistency.a.flagged,
                                           flagged_b=consistency.b.flagged)
         lap("intervals")
+
+    # 10. FFR along the segment and its interval over the intervals' draws (recon.lumen.ffr);
+    #     a tree's branch is solved with its whole tree (recon.tree).
+    ffr = None
+    if junction is None:
+        ffr = vessel_ffr(profile, intervals.profiles if intervals is not None else (),
+                         ffr_model(options), seg.name)
+        lap("ffr")
     timings["total"] = round(sum(timings.values()), 2)
     _notify(progress, "done", 1.0)
 
@@ -481,6 +499,7 @@ def reconstruct_pair(
         warnings=tuple(warnings),
         optimal_view=next_view,
         intervals=intervals,
+        ffr=ffr,
     )
 
 
@@ -566,6 +585,23 @@ def input_warnings(info: dict, view: str) -> list[str]:
         return []
     more = f" ({'; '.join(details)})" if details else ""
     return [f"view {view}: {', '.join(words)} image{more}; its radii are less certain"]
+
+
+def ffr_model(options: ReconstructionOptions) -> FFRModel:
+    """The FFR model of ``options`` (FFRError when a value is outside its physical range)."""
+    return FFRModel(aortic_pressure_mmhg=options.aortic_pressure_mmhg,
+                    velocity_m_s=options.ffr_velocity_m_s,
+                    split_exponent=options.ffr_split_exponent)
+
+
+def _ffr_value(ffr: FFRResult | None) -> dict:
+    """``measurements.ffr``: the distal FFR ({} without one)."""
+    return {} if ffr is None else {"ffr": round(ffr.distal, 4)}
+
+
+def _ffr_ci95(ffr: FFRResult | None) -> dict:
+    """``measurements_ci95.ffr``: the distal FFR's 95 % interval ({} without one)."""
+    return {} if ffr is None or ffr.ci95 is None else {"ffr": [round(v, 4) for v in ffr.ci95]}
 
 
 def _uncertainty_report(intervals: MeasurementIntervals | None) -> dict | None:

@@ -39,6 +39,9 @@ from recon.lumen import (
     lumen_profile,
     measure_lumen,
 )
+from recon.lumen.bifurcation import nearest_on_polyline
+from recon.lumen.ffr import FFRVessel, Lumen, tree_ffr
+from recon.lumen.lesions import ostium_zone_end_s_mm
 from recon.pipeline import (
     PipelineError,
     Progress,
@@ -49,6 +52,7 @@ from recon.pipeline import (
     _trace_pair,
     calibrate_view_b,
     check_calibration,
+    ffr_model,
     reconstruct_pair,
 )
 from recon.pose import CalibrationResult, measurement_intervals, optimal_view, refine_with_matches
@@ -250,6 +254,7 @@ def reconstruct_tree(
                 rec = _from_carina(replace(rec, calibration=calibration), junction)
             branches.append(rec)
         branches = _best_views_among_branches(branches)
+        branches = _with_tree_ffr(seeds, branches, options)
     _notify(progress, "building the tree's surface", 0.85)
     t1 = time.perf_counter()
     if len(branches) == 1:  # the segment's own surface is the tree's
@@ -278,6 +283,25 @@ def _best_views_among_branches(branches: list[Reconstruction]) -> list[Reconstru
     return [replace(rec, optimal_view=optimal_view(
         *shapes[k], rec.view_a, {"a": rec.view_a, "b": rec.view_b},
         others=tuple(shapes[:k] + shapes[k + 1:]))) for k, rec in enumerate(branches)]
+
+
+def _with_tree_ffr(seeds: Seeds, branches: list[Reconstruction],
+                   options: ReconstructionOptions) -> list[Reconstruction]:
+    """Each branch with its FFR solved over the whole tree (recon.lumen.ffr): the flow splits
+    at each bifurcation, a branch's pullback (from its carina) starts at its parent's
+    pressure where it leaves the parent; the interval pairs draw k of every branch."""
+    vessels = []
+    for k, rec in enumerate(branches):
+        seg = seeds.segments[k]
+        parent = None if seg.parent is None else seeds.segment_index(seg.parent)
+        join_s = 0.0 if parent is None else nearest_on_polyline(
+            branches[parent].centerline_3d.X_world, rec.centerline_3d.X_world[0])[1]
+        draws = () if rec.intervals is None else tuple(Lumen.from_profile(p)
+                                                       for p in rec.intervals.profiles)
+        vessels.append(FFRVessel(Lumen.from_profile(rec.profile), parent, join_s, draws,
+                                 seg.name))
+    results = tree_ffr(vessels, ffr_model(options))
+    return [replace(rec, ffr=result) for rec, result in zip(branches, results, strict=True)]
 
 
 #: Reliability given to a traced point whose lumen another segment's lumen overlaps in
@@ -474,15 +498,24 @@ def _ms(since: float) -> float:
 
 def _from_carina(rec: Reconstruction, junction: Junction) -> Reconstruction:
     """A branch's profile and measurements from its carina on (the stretch before
-    lies inside the parent's lumen); arc lengths stay the branch's own. Its 95 %
+    lies inside the parent's lumen), its ostium zone marked (a narrowing there is a
+    lesion only with the profile's support past it, :mod:`recon.lumen.measure`); arc
+    lengths stay the branch's own. Its 95 %
     intervals are sampled from the pose posterior of ``rec.calibration`` (the tree's)
     and measured the same way, from the carina on (none without a posterior)."""
     cl = rec.centerline_3d
     s_c = carina_s_mm(cl.X_world, junction.parent_X_world, junction.parent_radius_mm)
     keep = cl.s_mm >= s_c
+    ostium = None
     if np.count_nonzero(keep) < 12:  # too short beyond the carina: the whole branch
         s_c, keep = float(cl.s_mm[0]), np.ones(len(cl.s_mm), dtype=bool)
-    profile = lumen_profile(cl.s_mm[keep], rec.surface.sections.area_mm2[keep])
+    else:  # where the parent's lumen confounds the branch's radii (recon.lumen.lesions)
+        area = rec.surface.sections.area_mm2
+        ostium = ostium_zone_end_s_mm(
+            cl.X_world, cl.s_mm, float(np.median(np.sqrt(area[keep] / np.pi))),
+            junction.parent_X_world, junction.parent_radius_mm, (rec.view_a, rec.view_b), s_c)
+    profile = lumen_profile(cl.s_mm[keep], rec.surface.sections.area_mm2[keep],
+                            ostium_end_s_mm=ostium)
     measurements = measure_lumen(profile)
     intervals = None
     calibration = rec.calibration
@@ -491,7 +524,8 @@ def _from_carina(rec: Reconstruction, junction: Junction) -> Reconstruction:
             rec.consistency.a.flagged, rec.consistency.b.flagged)
         intervals = measurement_intervals(rec.view_a, rec.view_b_header, calibration.posterior,
                                           cl, measurements, flagged_a=flagged[0],
-                                          flagged_b=flagged[1], measure_from_s_mm=s_c)
+                                          flagged_b=flagged[1], measure_from_s_mm=s_c,
+                                          ostium_end_s_mm=ostium)
     return replace(rec, profile=profile, measurements=measurements, intervals=intervals)
 
 

@@ -84,7 +84,12 @@ def test_outputs_carry_every_branch(tree_case, tmp_path):
     assert single <= set(report)  # today's keys, for the first segment
     assert len(report["branches"]) == len(tc.seeds.segments)
     assert set(report["branches"][1]) >= single
-    assert report["measurements"] == rec.first.measurements.to_dict()
+    assert report["measurements"] == {**rec.first.measurements.to_dict(),
+                                      "ffr": round(rec.first.ffr.distal, 4)}
+    # every branch's FFR block and value, solved over the tree (recon.lumen.ffr)
+    for entry, branch in zip(report["branches"], rec.branches, strict=True):
+        assert entry["measurements"]["ffr"] == entry["ffr"]["distal"] == round(branch.ffr.distal, 4)
+        assert len(entry["ffr"]["s_mm"]) == len(entry["ffr"]["ffr"]) == len(branch.profile.s_mm)
     assert report["tree"]["mesh"]["components"] == 1
     assert {"bifurcation_angle_deg", "medina", "side_branch"} <= set(report["bifurcations"][0])
     lines = files["centerline.csv"].decode().splitlines()
