@@ -34,16 +34,15 @@ from viewer_app.access import PATCHED_VISER_VERSION, FileAccess, ServerGuard, gu
 from viewer_app.autosave import Autosave, default_autosave_path
 from viewer_app.camera import PageCameras
 from viewer_app.catheter import CatheterTool
-from viewer_app.exports import EXPORT_KINDS, export_bytes, export_name
+from viewer_app.exports import EXPORT_KINDS
 from viewer_app.panels import Panels, build_panels
-from viewer_app.progress import loading_notes
 from viewer_app.results import close_views_warning
+from viewer_app.runs import RunCommands
 from viewer_app.scene import LAYOUTS, ModelNodes, View
 from viewer_app.state import Mark, MarkState
 
 if TYPE_CHECKING:
     from recon.io.overrides import GeometryOverrides
-    from recon.pipeline import Reconstruction
     from recon.pose.calibration import CalibrationResult
     from viewer_app.tree_view import Result
 
@@ -56,7 +55,7 @@ SNAP_MAX_PX = 8.0
 FloatArray = NDArray[np.float64]
 
 
-class ViewerApp:
+class ViewerApp(RunCommands):
     """The viewer: a viser server plus the state of one image pair.
 
     Parameters
@@ -419,6 +418,10 @@ class ViewerApp:
             except ValueError as exc:
                 self.notify("Click ignored", str(exc), "error", client)
                 return None
+            doubt = self.state.pairing_doubt(mark)
+            if doubt is not None:  # shown in the marks panel and said at once
+                self.state.last_message = doubt
+                self.notify("Check the landmark pair", doubt, "warning", client)
             self._redraw_marks()
             self.last_click_ms = (time.perf_counter() - t0) * 1e3
             if self.state.last_message:  # shown in the marks panel, not as a toast over A
@@ -553,140 +556,3 @@ class ViewerApp:
             self.autosave.save(self.state)
         except OutputError as exc:
             log.warning("autosave failed: %s", exc)
-
-    # ================================================================ compute
-    def calibrate(self, client: object | None = None) -> CalibrationResult | None:
-        """PALM calibration of view B on the marks; returns the CalibrationResult or None."""
-
-        def run() -> CalibrationResult:
-            from recon.pipeline import calibrate_from_seeds
-
-            with self._lock:
-                seeds, segment = tree_view.seeds_for_run(self.state)
-                a, b = self.views["a"].angio, self.views["b"].angio
-            maps = (self.views["a"].get_vesselness(), self.views["b"].get_vesselness())
-            # The same traced ends as Reconstruct's calibration step: the same figures.
-            res = calibrate_from_seeds(a, b, seeds, optimizer="palm", segment=segment,
-                                       vesselness=maps,
-                                       intensity=(self.intensity["a"], self.intensity["b"]))
-            with self._lock:
-                self.calibration = res
-                self.state.set_calibrated_b(res.view_b)
-                self.panels.show_calibration(res)
-                self._redraw_marks()
-            self.notify("Calibrated", f"error {res.error_before_px:.2f} px -> "
-                        f"{res.error_after_px:.2f} px", "success", client)
-            return res
-
-        return self.guard("Calibrate", client, run)
-
-    def reconstruct(self, client: object | None = None) -> Result | None:
-        """Reconstruct the marks in a child process, under ``self.limits``
-        (recon.io.isolated): the current segment if one segment is complete, else every
-        complete segment as one tree (recon.tree); draw and tabulate the result."""
-        if self._busy:
-            self.notify("Busy", "a reconstruction is already running", "warning", client)
-            return None
-        clients = [client] if client is not None else list(self.server.get_clients().values())
-        self.progress_log = []
-        handles: list = []
-
-        def progress(stage: str, fraction: float) -> None:
-            self.progress_log.append((stage, float(fraction)))
-            self.panels.show_progress(fraction)
-            for h in handles:
-                h.body = f"{stage} ({fraction * 100:.0f} %)"
-
-        def run() -> Result:
-            with self._lock:
-                seeds, segment = tree_view.seeds_for_run(self.state)
-                view_a, view_b = self.views["a"], self.views["b"]
-            rec = tree_view.run_reconstruction(view_a, view_b, seeds, segment, self.intensity,
-                                               self.limits, progress)
-            with self._lock:
-                self.reconstruction = rec
-                self.calibration = rec.calibration
-                self.state.set_calibrated_b(tree_view.branches_of(rec)[0].view_b)
-                self.state.select(None)  # no guide line across the results
-                self.panels.show_calibration(rec.calibration)
-                self._show_reconstruction(rec)
-                self._redraw_marks()
-            self.notify("Reconstructed", tree_view.summary_text(rec), "success", client)
-            return rec
-
-        self._busy = True
-        try:
-            with loading_notes(clients, "Reconstructing") as notes:
-                handles += notes
-                return self.guard("Reconstruct", client, run)
-        finally:
-            self._busy = False
-
-    def _clear_results(self) -> None:
-        scene.clear_results(self.server.scene, self.views)
-        self.model = None
-        self.lesion = None
-        self.panels.clear_results()
-
-    def _show_reconstruction(self, rec: Result) -> None:
-        """Traces, back-projections and lesion marks on the images, the coloured mesh (a
-        tree's: each branch in its colour, the current segment's shown), the results
-        table and the profile; the page shows the angiograms and the model."""
-        current = self.state.segment_names[self.state.current_segment]
-        self.model, self.shown_branch = tree_view.draw_result(
-            self.server.scene, self.views, rec, current)
-        self._show_branch(rec, self.shown_branch, redraw=False)
-        self.lesion = None
-        self.set_layout("Angiograms + 3D")
-
-    def _show_branch(self, rec: Result, index: int, redraw: bool = True) -> None:
-        """The results panel on branch ``index`` (its table, chart and lesion sliders; a
-        tree's branch line and bifurcations) and, with ``redraw``, that branch highlighted
-        on the images and the model."""
-        if redraw:
-            tree_view.highlight_branch(self.server.scene, self.views, rec, self.model, index)
-        self.panels.show_reconstruction(tree_view.branches_of(rec)[index])
-        self.panels.show_tree(rec, index)
-
-    @property
-    def branch(self) -> Reconstruction | None:
-        """The reconstruction the results panel shows: the one segment's, or the tree's
-        branch chosen under Segment (None before any Reconstruct)."""
-        rec = self.reconstruction
-        return None if rec is None else tree_view.branches_of(rec)[self.shown_branch]
-
-    def set_lesion(self, start_mm: float, end_mm: float,
-                   reference_mm: tuple[float, float] | None = None) -> dict[str, float]:
-        """Lesion ends (and reference sites, default the ends) set by the clinician (mm
-        along the vessel): the measurements, chart and MLD / lesion marks follow."""
-        from viewer_app.results import lesion_measurements
-
-        with self._lock:
-            rec = self.branch
-            if rec is None or self.model is None:
-                raise ValueError("lesion: reconstruct first")
-            lesion = lesion_measurements(rec.profile, start_mm, end_mm, reference_mm)
-            self.lesion = lesion
-            self.panels.show_lesion(rec, lesion)
-            marks = {"MLD": lesion["mld_s_mm"], "lesion start": lesion["lesion_start_s_mm"],
-                     "lesion end": lesion["lesion_end_s_mm"]}
-            scene.draw_lesion_marks(self.server.scene, self.views, rec, self.model, marks,
-                                    lesion["mld_mm"])
-            return lesion
-
-    # ================================================================ export
-    def export(self, kind: str) -> bytes:
-        """Bytes of an output (:func:`viewer_app.exports.export_bytes`)."""
-        return export_bytes(kind, self.reconstruction, self.seeds())
-
-    def download(self, kind: str, client: object | None = None) -> None:
-        """Send an export to the browser (a file download)."""
-
-        def run() -> None:
-            data, name = self.export(kind), export_name(kind)
-            targets = [client] if client is not None else list(self.server.get_clients().values())
-            for c in targets:
-                c.send_file_download(name, data, save_immediately=True)
-
-        self.guard("Download", client, run)
-

@@ -28,6 +28,7 @@ __all__ = [
     "angle_text",
     "bifurcations_markdown",
     "branch_stretches",
+    "calibration_doubts",
     "calibration_markdown",
     "clinical_markdown",
     "close_views_warning",
@@ -124,6 +125,14 @@ def segments_lines(state: MarkState) -> list[str]:
         lines.append(f"- {shown}" + ("" if link is None else
                                       f" ↳ branch of {link[0]} at landmark {link[1]}"))
     return lines
+
+
+def calibration_doubts(res: CalibrationResult | None) -> list[str]:
+    """The calibration's warnings that put every figure in doubt: a clicked
+    correspondence still far off after calibration, or a pose correction larger than a
+    header is ever wrong by. Both come of a click on the wrong place or two landmarks
+    paired wrongly (recon.pose.calibration)."""
+    return [w for w in getattr(res, "warnings", ()) if " still " in w or "implausible" in w]
 
 
 def calibration_markdown(res: CalibrationResult) -> str:

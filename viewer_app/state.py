@@ -29,13 +29,24 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import replace
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from recon.geometry import ViewGeometry, epipolar_lines
 from recon.seeds import MAX_NAME_CHARS, Feature, Seeds, Segment, seeds_from_dict
+from viewer_app.marks import (
+    KIND_WORDS,
+    MODE_LABELS,
+    MODES,
+    ONE_SHOT_MODES,
+    VIEWS,
+    Mark,
+    check_view,
+    mark_from_entry,
+    other_view,
+)
 from viewer_app.saved_names import read_names
 
 __all__ = [
@@ -48,82 +59,16 @@ __all__ = [
 
 FloatArray = NDArray[np.float64]
 
-MODES: tuple[str, ...] = ("guided", "proximal", "waypoint", "distal", "feature")
-ONE_SHOT_MODES = ("proximal", "distal")  # redo one end, then back to guided
-MODE_LABELS: dict[str, str] = {
-    "guided": "Guided (ends, then landmarks)",
-    "proximal": "Segment proximal end",
-    "waypoint": "Waypoint",
-    "distal": "Segment distal end",
-    "feature": "Landmark pair (A and B)",
-}
-KIND_WORDS = {"proximal": "proximal end", "distal": "distal end", "feature": "landmark",
-              "waypoint": "waypoint"}
-VIEWS: tuple[str, str] = ("a", "b")
-MAX_GROUPS = 1000  # segments or features of one pair (seeds files hold at most 100 / 1000)
+#: A landmark clicked this close (px) to one already placed in that view is the same
+#: landmark placed again (not a second pair at the same place).
+SAME_LANDMARK_PX = 4.0
+#: A landmark paired at least this far (px) from its partner's epipolar line, and at
+#: most half as far from that of another landmark still waiting, is doubted.
+PAIRING_DOUBT_PX = 12.0
 
 # A snapper takes (view, raw click (2,)) and returns (placed point (2,), snap distance in
 # px or None when the click was kept raw, a one-line message for the user or None).
 Snapper = Callable[[str, FloatArray], tuple[FloatArray, float | None, str | None]]
-
-
-def _other(view: str) -> str:
-    return "b" if view == "a" else "a"
-
-
-def _check_view(view: str) -> str:
-    if view not in VIEWS:
-        raise ValueError(f"view must be 'a' or 'b', got {view!r}")
-    return view
-
-
-@dataclass(frozen=True)
-class Mark:
-    """One placed click.
-
-    Attributes
-    ----------
-    id : unique, increasing in click order.
-    kind : one of :data:`MODES`.
-    view : "a" or "b".
-    group : segment index (proximal/waypoint/distal) or feature index.
-    point_px : (2,) placed position (col, row), snapped when possible.
-    raw_px : (2,) where the user clicked.
-    snap_distance_px : distance from raw to snapped point, None if kept raw.
-    """
-
-    id: int
-    kind: str
-    view: str
-    group: int
-    point_px: tuple[float, float]
-    raw_px: tuple[float, float]
-    snap_distance_px: float | None = None
-
-    def to_dict(self) -> dict:
-        return {
-            "id": self.id,
-            "kind": self.kind,
-            "view": self.view,
-            "group": self.group,
-            "point_px": list(self.point_px),
-            "raw_px": list(self.raw_px),
-            "snap_distance_px": self.snap_distance_px,
-        }
-
-    @classmethod
-    def from_dict(cls, data: dict) -> Mark:
-        return cls(
-            id=int(data["id"]),
-            kind=str(data["kind"]),
-            view=str(data["view"]),
-            group=int(data["group"]),
-            point_px=(float(data["point_px"][0]), float(data["point_px"][1])),
-            raw_px=(float(data["raw_px"][0]), float(data["raw_px"][1])),
-            snap_distance_px=(
-                None if data.get("snap_distance_px") is None else float(data["snap_distance_px"])
-            ),
-        )
 
 
 def clip_line_to_image(line: ArrayLike, cols: int, rows: int) -> FloatArray | None:
@@ -203,7 +148,7 @@ class MarkState:
         return self.view_b_calibrated if self.view_b_calibrated is not None else self.view_b_nominal
 
     def geometry(self, view: str) -> ViewGeometry:
-        return self.view_a if _check_view(view) == "a" else self.view_b
+        return self.view_a if check_view(view) == "a" else self.view_b
 
     def set_calibrated_b(self, view_b: ViewGeometry | None) -> None:
         """Use a calibrated geometry for view B (None: back to the header geometry)."""
@@ -288,7 +233,7 @@ class MarkState:
         if partner is None:
             raise ValueError(f"New branch: landmark {self.label(mark)} is only in "
                              f"{mark.view.upper()}; click the bifurcation in "
-                             f"{_other(mark.view).upper()} too (on the magenta line)")
+                             f"{other_view(mark.view).upper()} too (on the magenta line)")
         if name is not None and name in self.segment_names:
             raise ValueError(f"New branch: a segment is already called {name!r}")
         parent = self.segment_names[self.current_segment]
@@ -355,7 +300,7 @@ class MarkState:
         click too far from any vessel is kept raw and :attr:`last_message`
         says so. Returns the new mark, which becomes the selected one.
         """
-        _check_view(view)
+        check_view(view)
         geom = self.geometry(view)
         if not (-0.5 <= col <= geom.cols - 0.5 and -0.5 <= row <= geom.rows - 0.5):
             raise ValueError(
@@ -367,7 +312,7 @@ class MarkState:
         self._push()
         kind = self.mode if self.mode != "guided" else self.guided_kind(view)
         if kind == "feature":
-            group = self._feature_group_for(view)
+            group = self._feature_group_for(view, point)
         else:
             group = self.current_segment
         if kind in ("proximal", "distal", "feature"):  # one per (kind, view, group)
@@ -401,14 +346,14 @@ class MarkState:
         """What a guided click in ``view`` places: the current segment's proximal end,
         then its distal end, then a landmark."""
         for end in ("proximal", "distal"):
-            if not self._has(end, _check_view(view), self.current_segment):
+            if not self._has(end, check_view(view), self.current_segment):
                 return end
         return "feature"
 
     def _guide_after(self, mark: Mark) -> int | None:
         """The mark whose epipolar line shows where the next click in the other view
         belongs: the partner-to-be of what that click will place."""
-        other = _other(mark.view)
+        other = other_view(mark.view)
         kind = self.guided_kind(other)
         if kind == "feature":
             group = self._feature_group_for(other)
@@ -431,17 +376,20 @@ class MarkState:
         nxt = self.next_clicks()
         ends_done = all(self._has(e, v, self.current_segment)
                         for e in ("proximal", "distal") for v in VIEWS)
-        pending = [m for m in self.marks if m.kind == "feature"
-                   and self.partner(m) is None]
         text = f"Next click in **A**: {nxt['a']} · in **B**: {nxt['b']}."
         guide = self.mark_by_id(self._guide_id)
         if guide is not None and self.partner(guide) is None:
-            text += (f" The magenta line in {_other(guide.view).upper()} shows where "
+            text += (f" The magenta line in {other_view(guide.view).upper()} shows where "
                      f"{self.label(guide)} lies there.")
-        if pending:
-            p = pending[-1]
-            text += (f" Landmark {p.group + 1} waits for its partner in "
-                     f"{_other(p.view).upper()} (on the magenta line).")
+        for view in VIEWS:
+            waiting = [f"F{g + 1}" for g in self.waiting_landmarks(view)]
+            if len(waiting) == 1:
+                text += (f" Landmark {waiting[0]} waits for its partner in "
+                         f"{other_view(view).upper()} (on the magenta line).")
+            elif waiting:
+                text += (f" Landmarks {', '.join(waiting)} wait for their partners in "
+                         f"{other_view(view).upper()}, in that order: the next landmark "
+                         f"clicked there pairs with {waiting[0]} (on the magenta line).")
         if ends_done:
             n = len(self.to_seeds().features)
             text += (f" ✔ Segment ready: press **Reconstruct**. {n} landmark pair(s): "
@@ -449,21 +397,99 @@ class MarkState:
                      f"({2 + n} of 5 correspondences).")
         return text
 
-    def _feature_group_for(self, view: str) -> int:
-        """Feature index a click in ``view`` goes to: the pending partner, or a new one."""
+    def _feature_group_for(self, view: str, point_px: FloatArray | None = None) -> int:
+        """Feature index a click in ``view`` (at ``point_px``, when known) goes to: the
+        landmark already placed in ``view`` within :data:`SAME_LANDMARK_PX` of the click
+        (it is placed again, not counted twice), else the oldest landmark of the other
+        view still waiting for its partner (landmarks pair in the order they were
+        clicked: all of A's, then all of B's, pair one by one), else a new one."""
+        if point_px is not None:
+            for m in self.marks:
+                if (m.kind == "feature" and m.view == view and float(np.hypot(
+                        *(np.asarray(m.point_px) - point_px))) <= SAME_LANDMARK_PX):
+                    return m.group
         groups: dict[int, set[str]] = {}
         for m in self.marks:
             if m.kind == "feature":
                 groups.setdefault(m.group, set()).add(m.view)
         for g in sorted(groups):
-            if groups[g] == {_other(view)}:
+            if groups[g] == {other_view(view)}:
                 return g
-        if groups:
-            last = max(groups)
-            if groups[last] == {view}:  # still waiting for its partner: replace the click
-                return last
-            return last + 1
-        return 0
+        return max(groups) + 1 if groups else 0
+
+    def waiting_landmarks(self, view: str) -> list[int]:
+        """The landmark groups placed in ``view`` only, oldest first: the next landmark
+        clicked in the other view pairs with the first."""
+        return sorted({m.group for m in self.marks if m.kind == "feature" and m.view == view
+                       and self.partner(m) is None})
+
+    def pairing_doubt(self, mark: Mark) -> str | None:
+        """When ``mark``, a landmark that has just been paired, lies much nearer the
+        magenta (epipolar) line of another landmark still waiting than that of its
+        partner: one line saying so (the clicks may be out of order), else None."""
+        partner = self.partner(mark) if mark.kind == "feature" else None
+        if partner is None:
+            return None
+        others = [self.marks_by_group(g, partner.view) for g in
+                  self.waiting_landmarks(partner.view)]
+        if not others:
+            return None
+        src, dst = self.geometry(partner.view), self.geometry(mark.view)
+        lines = epipolar_lines(np.asarray([partner.point_px] + [o.point_px for o in others]),
+                               src, dst)
+        p = np.array([*mark.point_px, 1.0])
+        dist = np.abs(lines @ p) / np.hypot(lines[:, 0], lines[:, 1])
+        k = int(np.argmin(dist[1:])) + 1
+        if dist[0] < PAIRING_DOUBT_PX or dist[k] > 0.5 * dist[0]:
+            return None
+        near = self.label(others[k - 1])
+        return (f"{self.label(mark)} in {mark.view.upper()} was paired with "
+                f"{self.label(partner)} in {partner.view.upper()} (landmarks pair in click "
+                f"order) but lies {dist[0]:.0f} px off its magenta line and {dist[k]:.0f} px "
+                f"off {near}'s: if it is {near}'s partner, press Undo and click "
+                f"{self.label(partner)}'s partner first, or drag the marks where they belong")
+
+    def marks_by_group(self, group: int, view: str, kind: str = "feature") -> Mark:
+        """The mark of ``kind`` (a landmark by default) of ``group`` in ``view``."""
+        return next(m for m in self.marks if m.kind == kind and m.group == group
+                    and m.view == view)
+
+    # ------------------------------------------------------------ editing one mark
+    def move_mark(self, mark_id: int, col: float, row: float, snap: bool = True,
+                  undoable: bool = True) -> Mark:
+        """Put mark ``mark_id`` at pixel (col, row) of its view (snapped to the vessel as
+        a click is, with ``snap``); it keeps its kind, group and id and becomes the
+        selected mark. One undo step with ``undoable`` (a drag's intermediate positions
+        are not: its first move is). Raises ValueError for no such mark or a place
+        outside the image."""
+        mark = self.mark_by_id(mark_id)
+        if mark is None:
+            raise ValueError(f"no mark with id {mark_id}")
+        geom = self.geometry(mark.view)
+        col = float(np.clip(col, -0.5, geom.cols - 0.5))
+        row = float(np.clip(row, -0.5, geom.rows - 0.5))
+        raw = np.array([col, row], dtype=float)
+        point, distance = self._place(mark.view, raw) if snap else (raw, None)
+        if undoable:
+            self._push()
+        moved = replace(mark, point_px=(float(point[0]), float(point[1])),
+                        raw_px=(col, row), snap_distance_px=distance)
+        self.marks = [moved if m.id == mark_id else m for m in self.marks]
+        self.selected_id, self._guide_id = mark_id, None
+        return moved
+
+    def delete_mark(self, mark_id: int | None = None) -> Mark:
+        """Remove one mark (default: the selected one); one undo step. A landmark's
+        partner then waits for a new partner. Raises ValueError when there is no such
+        mark (or nothing is selected)."""
+        mark = self.mark_by_id(self.selected_id if mark_id is None else mark_id)
+        if mark is None:
+            raise ValueError("Delete: select a mark first (click it, drag it, or pick it "
+                             "under 'Selected mark')")
+        self._push()
+        self.marks = [m for m in self.marks if m.id != mark.id]
+        self.selected_id, self._guide_id = None, None
+        return mark
 
     def select(self, mark_id: int | None) -> None:
         if mark_id is not None and self.mark_by_id(mark_id) is None:
@@ -523,11 +549,11 @@ class MarkState:
             mark = self.mark_by_id(self._guide_id) or self.selected
         if mark is None:
             return None
-        src, dst = self.geometry(mark.view), self.geometry(_other(mark.view))
+        src, dst = self.geometry(mark.view), self.geometry(other_view(mark.view))
         line = epipolar_lines(np.asarray([mark.point_px]), src, dst)[0]
         seg = clip_line_to_image(line, dst.cols, dst.rows)
         self.last_epipolar_ms = (time.perf_counter() - t0) * 1e3
-        return None if seg is None else (_other(mark.view), seg)
+        return None if seg is None else (other_view(mark.view), seg)
 
     # ------------------------------------------------------------ seeds
     def to_seeds(self) -> Seeds:
@@ -649,7 +675,7 @@ class MarkState:
             raise ValueError(f"{source}: damaged viewer state (no list of marks)")
         marks: list[Mark] = []
         for entry in entries:
-            mark = _mark_or_none(entry)
+            mark = mark_from_entry(entry)
             if mark is None or any(m.id == mark.id for m in marks):
                 continue
             marks.append(mark)
@@ -668,19 +694,3 @@ class MarkState:
         self.selected_id = None
         self._next_id = max((m.id for m in marks), default=0) + 1
         return len(entries) - len(marks)
-
-
-def _mark_or_none(entry: object) -> Mark | None:
-    """A mark from its autosave entry, or None when the entry is damaged."""
-    if not isinstance(entry, dict):
-        return None
-    try:
-        mark = Mark.from_dict(entry)
-    except (KeyError, TypeError, ValueError, IndexError, OverflowError):
-        return None
-    coords = (*mark.point_px, *mark.raw_px)
-    if (mark.kind not in MODES or mark.view not in VIEWS or not 0 <= mark.group < MAX_GROUPS
-            or mark.id < 1 or not all(np.isfinite(coords))):
-        return None
-    return mark
-

@@ -18,157 +18,21 @@ from pathlib import Path
 import numpy as np
 import pytest
 import trimesh
+from browser_page import (  # tests/viewer_app/browser_page.py
+    CANVAS_JS,
+    CHROMIUM,
+    MARK_LABELS_JS,
+    Browser,
+    failed,
+    screen_box,
+    wait_for,
+)
 
 from recon.io import load_seeds
 from viewer_app import ViewerApp, scene
 from viewer_app.state import MODE_LABELS
 
-CHROMIUM = "/usr/bin/chromium"
-FLAGS = [
-    "--headless",
-    "--no-sandbox",
-    "--disable-gpu",
-    "--disable-quic",
-    "--no-first-run",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--disable-sync",
-    "--enable-unsafe-swiftshader",
-]
-
 pytestmark = pytest.mark.browser
-
-# node-local point -> CSS pixel of the page, through the node's world matrix
-# (the root of viser's scene is rotated) and the three.js camera.
-PROJECT_JS = """
-([name, x, y, z]) => {
-  const m = window.__viserMutable;
-  const ref = m.nodeRefFromName[name];
-  const node = ref && ref.current !== undefined ? ref.current : ref;
-  const cam = m.camera && m.camera.current !== undefined ? m.camera.current : m.camera;
-  const canvas = m.canvas && m.canvas.current !== undefined ? m.canvas.current : m.canvas;
-  node.updateWorldMatrix(true, false);
-  const p = new node.position.constructor(x, y, z).applyMatrix4(node.matrixWorld).project(cam);
-  const r = canvas.getBoundingClientRect();
-  return [r.left + (p.x + 1) / 2 * r.width, r.top + (1 - p.y) / 2 * r.height];
-}
-"""
-
-READY_JS = """
-() => {
-  const m = window.__viserMutable;
-  if (!m || !m.nodeRefFromName) return false;
-  if (document.body.innerText.includes("Connecting")) return false;
-  return ["/view_a", "/view_b", "/over_a/marks"].every((n) => {
-    const r = m.nodeRefFromName[n];
-    return r && (r.current !== undefined ? r.current : r);
-  });
-}
-"""
-
-
-DISMISS_JS = """
-() => {  // close the 'Software WebGL rendering' toast (a GPU-less machine only)
-  for (const n of document.querySelectorAll('.mantine-Notification-root')) {
-    if (n.innerText.includes('Software WebGL')) {
-      const b = n.querySelector('button'); if (b) b.click();
-    }
-  }
-}
-"""
-
-MARK_LABELS_JS = """
-() => Object.keys(window.__viserMutable.nodeRefFromName)  // scene nodes of the mark labels
-  .filter((n) => /[/]labels[/]m[0-9]+$/.test(n))
-"""
-
-
-def _wait(predicate, timeout_s: float, what: str) -> None:
-    t_end = time.monotonic() + timeout_s
-    while time.monotonic() < t_end:
-        if predicate():
-            return
-        time.sleep(0.05)
-    raise AssertionError(f"timed out after {timeout_s:.0f} s waiting for {what}")
-
-
-class Browser:
-    """One Chromium (Playwright) with a page on a viewer; clicks are real mouse events."""
-
-    def __init__(self, pw: object, profile: Path, out: Path) -> None:
-        self.ctx = pw.chromium.launch_persistent_context(
-            str(profile), executable_path=CHROMIUM, args=FLAGS, headless=True,
-            viewport={"width": 1400, "height": 900}, accept_downloads=True)
-        self.page = self.ctx.new_page()
-        self.out = out
-        self.shots: list[str] = []
-
-    def open(self, app: ViewerApp) -> None:
-        self.app = app
-        self.page.goto(app.url)
-        self.settle()
-
-    def reload(self) -> None:
-        self.page.reload()
-        self.settle()
-
-    def settle(self) -> None:
-        self.page.wait_for_function(READY_JS, timeout=30_000)
-        self.page.wait_for_timeout(1500)  # nodes fade in, the canvas takes its size
-        self.page.evaluate(DISMISS_JS)
-        self.page.wait_for_timeout(300)
-
-    def shot(self, name: str) -> None:
-        self.page.wait_for_timeout(400)
-        # a loaded machine renders WebGL slowly (30 s was once not enough for the fonts)
-        self.page.screenshot(path=str(self.out / name), timeout=120_000)
-        self.shots.append(name)
-
-    def screen_xy(self, view: str, col: float, row: float) -> tuple[float, float]:
-        local = self.app.views[view].local_from_px(np.array([[col, row]]), z=0.0)[0]
-        x, y = self.page.evaluate(PROJECT_JS, [f"/view_{view}", *map(float, local)])
-        return float(x), float(y)
-
-    def click(self, view: str, col: float, row: float) -> tuple[object, list]:
-        """Click pixel (col, row) of image ``view``; returns (the new mark or None, the
-        notifications it raised)."""
-        app = self.app
-        x, y = self.screen_xy(view, col, row)
-        n_clicks, n_marks, n_notes = app.clicks_handled, app.state._next_id, len(app.notifications)
-        self.page.mouse.click(x, y)
-        try:
-            _wait(lambda: app.clicks_handled > n_clicks, 15,
-                  f"the click on {view.upper()} ({col:.0f}, {row:.0f}) at screen "
-                  f"({x:.0f}, {y:.0f}) to reach the server")
-        except AssertionError:
-            self.page.screenshot(path=str(self.out / "click_not_received.png"))
-            raise
-        new = [m for m in app.state.marks if m.id >= n_marks]
-        return (new[-1] if new else None), app.notifications[n_notes:]
-
-    def choose(self, label: str, option: str) -> None:
-        """Pick ``option`` in the dropdown labelled ``label`` (mouse clicks)."""
-        self.page.get_by_label(label, exact=True).click()
-        self.page.get_by_role("option", name=option, exact=True).click()
-
-    def text_field(self, label: str) -> object:
-        """The text input labelled ``label`` (viser's label is not linked to its input)."""
-        page = self.page
-        row = page.locator("div").filter(has=page.get_by_text(label, exact=True))
-        return row.filter(has=page.locator("input")).last.locator("input").first
-
-    def slider_thumb(self, label: str) -> object:
-        """The thumb of the slider labelled ``label``."""
-        page = self.page
-        row = page.locator("div").filter(has=page.get_by_text(label, exact=True))
-        return row.filter(has=page.locator(".mantine-Slider-thumb")).last.locator(
-            ".mantine-Slider-thumb").first
-
-    def dropdown_value(self, label: str) -> str:
-        return self.page.get_by_label(label, exact=True).input_value()
-
-    def close(self) -> None:
-        self.ctx.close()
 
 
 def _assert_lands(b: Browser, view: str, col: float, row: float, where: str) -> None:
@@ -241,7 +105,7 @@ def test_every_click_lands_on_the_image_it_was_made_on(
                 _assert_lands(b, "b", row, col, "after a restart")
             # The mode picked in the page is the one used.
             b.choose("Mode", MODE_LABELS["waypoint"])
-            _wait(lambda: app.state.mode == "waypoint", 10, "the mode to reach the server")
+            wait_for(lambda: app.state.mode == "waypoint", 10, "the mode to reach the server")
             mark, _ = b.click("a", 250, 250)
             assert mark is not None and mark.kind == "waypoint"
             b.shot("clicks_3_after_restart.png")
@@ -369,7 +233,7 @@ def test_guided_session_from_an_empty_page_to_a_mesh(
 
             # Calibrate, then Reconstruct: the same figures for the same marks.
             b.page.get_by_role("button", name="Calibrate (PALM)").click()
-            _wait(lambda: app.calibration is not None or _failed(app), 120, "calibration")
+            wait_for(lambda: app.calibration is not None or failed(app), 120, "calibration")
             assert app.calibration is not None, app.notifications[-3:]
             def errors() -> list[str]:  # the before / after rows of the calibration table
                 return [r for r in app.panels.calibrate.markdown.content.splitlines()
@@ -378,7 +242,7 @@ def test_guided_session_from_an_empty_page_to_a_mesh(
             calibrated = errors()
             assert len(calibrated) == 2
             b.page.get_by_role("button", name="Reconstruct", exact=True).click()
-            _wait(lambda: app.reconstruction is not None or _failed(app), 180, "reconstruction")
+            wait_for(lambda: app.reconstruction is not None or failed(app), 180, "reconstruction")
             rec = app.reconstruction
             assert rec is not None, app.notifications[-3:]
             assert errors() == calibrated, (calibrated, errors())
@@ -399,20 +263,20 @@ def test_guided_session_from_an_empty_page_to_a_mesh(
             b.page.mouse.down()
             b.page.mouse.move(cx + 160, cy + 40, steps=12)
             b.page.mouse.up()
-            _wait(lambda: app.layout == "3D model", 10, "the page to turn to the 3D model")
+            wait_for(lambda: app.layout == "3D model", 10, "the page to turn to the 3D model")
             assert not app.views["a"].nodes.image.visible
             b.page.wait_for_timeout(800)
             b.shot("guided_8_model_rotated.png")
             b.choose("Show", "Angiograms + 3D")
-            _wait(lambda: app.layout == "Angiograms + 3D", 10, "the layout")
+            wait_for(lambda: app.layout == "Angiograms + 3D", 10, "the layout")
             b.page.wait_for_timeout(800)
             client = next(iter(app.server.get_clients().values()))
-            _wait(lambda: scene.camera_rotated_deg(client) < 0.5, 10, "a straight camera")
+            wait_for(lambda: scene.camera_rotated_deg(client) < 0.5, 10, "a straight camera")
             assert app.views["a"].nodes.image.visible
 
             # After a reload the model is whole on the screen.
             b.reload()
-            box = _screen_box(b, "/model/mesh")
+            box = screen_box(b, "/model/mesh")
             canvas = b.page.evaluate(CANVAS_JS)
             assert box[0] >= 0 and box[1] >= 0 and box[2] <= canvas[0] and box[3] <= canvas[1], (
                 box, canvas)
@@ -434,7 +298,7 @@ def test_guided_session_from_an_empty_page_to_a_mesh(
             b.page.mouse.down()
             b.page.mouse.move(box["x"] - 40, box["y"] + box["height"] / 2, steps=8)
             b.page.mouse.up()
-            _wait(lambda: app.lesion is not None, 10, "the lesion to follow the slider")
+            wait_for(lambda: app.lesion is not None, 10, "the lesion to follow the slider")
             site = app.lesion["proximal_reference_s_mm"]
             assert site < m.lesion_start_s_mm - 2.0, (site, m.lesion_start_s_mm)
             assert app.lesion["lesion_start_s_mm"] == pytest.approx(m.lesion_start_s_mm, abs=0.1)
@@ -451,43 +315,6 @@ def test_guided_session_from_an_empty_page_to_a_mesh(
         finally:
             b.close()
             app.stop()
-
-
-CANVAS_JS = """
-() => { const m = window.__viserMutable; const c = m.canvas.current ?? m.canvas;
-        const r = c.getBoundingClientRect(); return [r.right, r.bottom]; }
-"""
-
-BOX_JS = """
-(name) => {
-  const m = window.__viserMutable;
-  const ref = m.nodeRefFromName[name];
-  const node = ref && ref.current !== undefined ? ref.current : ref;
-  const cam = m.camera.current ?? m.camera;
-  const canvas = m.canvas.current ?? m.canvas;
-  node.updateWorldMatrix(true, true);
-  const r = canvas.getBoundingClientRect();
-  const xs = [], ys = [];
-  node.traverse((o) => {
-    if (!o.geometry || !o.geometry.attributes.position) return;
-    const p = o.geometry.attributes.position;
-    for (let i = 0; i < p.count; i += 7) {
-      const v = new node.position.constructor(p.getX(i), p.getY(i), p.getZ(i))
-        .applyMatrix4(o.matrixWorld).project(cam);
-      xs.push(r.left + (v.x + 1) / 2 * r.width); ys.push(r.top + (1 - v.y) / 2 * r.height);
-    }
-  });
-  return [Math.min(...xs), Math.min(...ys), Math.max(...xs), Math.max(...ys)];
-}
-"""
-
-
-def _screen_box(b: Browser, name: str) -> list[float]:
-    return b.page.evaluate(BOX_JS, name)
-
-
-def _failed(app: ViewerApp) -> bool:
-    return any(level == "error" for level, _, _ in app.notifications)
 
 
 def _catheter_file(demo_a: Path, out: Path, row: float, cols: tuple[int, int],
@@ -535,7 +362,7 @@ def test_catheter_calibration_sets_the_pixel_spacing_from_two_clicks(
             field.fill(f"{french:g}")
             field.press("Enter")
             b.page.get_by_role("button", name="Measure catheter (click its 2 edges)").click()
-            _wait(lambda: app.catheter.active, 10, "the catheter measurement to start")
+            wait_for(lambda: app.catheter.active, 10, "the catheter measurement to start")
             # One click near each edge, a pixel or so off, as a hand places them.
             _, notes = b.click("a", 420.0, row - width_px / 2 - 1.0)
             assert notes == []  # the panel's note answers, no toast over view A's title
@@ -554,7 +381,7 @@ def test_catheter_calibration_sets_the_pixel_spacing_from_two_clicks(
             b.shot("catheter_1_measured.png")
             # Opening with this geometry uses it; clicks are marks again.
             b.page.get_by_role("button", name="Open with this geometry").click()
-            _wait(lambda: abs(app.views["a"].angio.geometry.pixel_spacing_mm[0]
+            wait_for(lambda: abs(app.views["a"].angio.geometry.pixel_spacing_mm[0]
                               - float(typed)) < 1e-6, 30, "the pair to reopen")
             b.settle()
             mark, _ = b.click("a", 300.0, 300.0)
@@ -598,32 +425,32 @@ def test_a_branch_added_from_a_landmark_and_the_tree_shown_branch_by_branch(
             mark = next(m for m in app.state.marks if m.kind == "feature" and m.view == "b"
                         and app.state.feature_name(m.group) == "arc/upper")
             b.choose("Selected mark", f"B {app.state.label(mark)} #{mark.id}")
-            _wait(lambda: app.state.selected_id == mark.id, 10, "the landmark to be selected")
+            wait_for(lambda: app.state.selected_id == mark.id, 10, "the landmark to be selected")
             new_branch.click()
-            _wait(lambda: len(app.state.segment_names) == 3, 10, "the new branch")
+            wait_for(lambda: len(app.state.segment_names) == 3, 10, "the new branch")
             assert app.state.segment_links["Segment 3"] == ("long arc", "arc/upper")
-            _wait(lambda: b.dropdown_value("Segment") == "Segment 3", 10,
+            wait_for(lambda: b.dropdown_value("Segment") == "Segment 3", 10,
                   "the page's Segment dropdown to show the branch")
             field = b.text_field("Segment name")  # the clinician names the branch
             field.fill("upper branch")
             b.page.get_by_role("button", name="Rename segment").click()
-            _wait(lambda: app.state.segment_names[2] == "upper branch", 10, "the rename")
+            wait_for(lambda: app.state.segment_names[2] == "upper branch", 10, "the rename")
             assert app.state.segment_links["upper branch"] == ("long arc", "arc/upper")
             assert "Segment 3" not in app.state.segment_links
-            _wait(lambda: b.dropdown_value("Segment") == "upper branch", 10,
+            wait_for(lambda: b.dropdown_value("Segment") == "upper branch", 10,
                   "the page's Segment dropdown to show the new name")
             for view, pts in (("a", upper.a_px), ("b", upper.b_px)):
                 new, notes = b.click(view, *pts[-1])  # guided: the distal end
                 assert new is not None and new.kind == "distal", notes
             b.choose("Mode", MODE_LABELS["waypoint"])
-            _wait(lambda: app.state.mode == "waypoint", 10, "the mode")
+            wait_for(lambda: app.state.mode == "waypoint", 10, "the mode")
             for view, pts in (("a", upper.a_px), ("b", upper.b_px)):
                 new, notes = b.click(view, *pts[1])
                 assert new is not None and new.kind == "waypoint", notes
             b.shot("tree_1_branch_marked.png")
             n_notes = len(app.notifications)  # the refusal above was an error already
             b.page.get_by_role("button", name="Reconstruct", exact=True).click()
-            _wait(lambda: any(n[0] == "error" or n[1] == "Reconstructed"  # drawn by then
+            wait_for(lambda: any(n[0] == "error" or n[1] == "Reconstructed"  # drawn by then
                               for n in app.notifications[n_notes:]), 180, "the tree")
             rec = app.reconstruction
             assert rec is not None and len(getattr(rec, "branches", ())) == 3, \
@@ -636,7 +463,7 @@ def test_a_branch_added_from_a_landmark_and_the_tree_shown_branch_by_branch(
             branch.scroll_into_view_if_needed()
             b.choose("Branch", "diagonal branch")
             m = rec.branches[1].measurements
-            _wait(lambda: f"**{m.mld_mm:.2f} mm**" in app.panels.results.clinical.content, 10,
+            wait_for(lambda: f"**{m.mld_mm:.2f} mm**" in app.panels.results.clinical.content, 10,
                   "the diagonal branch's table")
             assert app.shown_branch == 1
             assert app.state.segment_names[app.state.current_segment] == "diagonal branch"
@@ -647,7 +474,7 @@ def test_a_branch_added_from_a_landmark_and_the_tree_shown_branch_by_branch(
             b.page.get_by_text("Bifurcations").first.scroll_into_view_if_needed()
             b.shot("tree_4_bifurcations.png")
             b.choose("Show", "3D model")
-            _wait(lambda: app.layout == "3D model", 10, "the 3D model")
+            wait_for(lambda: app.layout == "3D model", 10, "the 3D model")
             b.page.wait_for_timeout(1000)
             b.shot("tree_5_model.png")
             # Renamed after Reconstruct: the results shown take the name, no new run.
@@ -655,7 +482,7 @@ def test_a_branch_added_from_a_landmark_and_the_tree_shown_branch_by_branch(
             field = b.text_field("Segment name")
             field.fill("D1")
             b.page.get_by_role("button", name="Rename segment").click()
-            _wait(lambda: b.dropdown_value("Branch") == "D1", 10,
+            wait_for(lambda: b.dropdown_value("Branch") == "D1", 10,
                   "the page's Branch dropdown to show the new name")
             assert "long arc › D1" in app.panels.results.bifurcations.content
             b.page.get_by_text("Branch shown: D1").first.wait_for(state="visible",

@@ -435,3 +435,100 @@ def test_renaming_a_segment_carries_its_branch_links_undoably_into_the_seeds(
     assert store.load_into(restored, None)
     assert restored.segment_names == ["LAD", "Segment 2"]
     assert restored.segment_links == st.segment_links
+
+
+def _ends(st: MarkState) -> None:
+    """Both ends of segment 1 in both views (guided), so that the next clicks are
+    landmarks."""
+    for view, pts in (("a", [(10, 20), (100, 120)]), ("b", [(11, 21), (90, 95)])):
+        for p in pts:
+            st.click(view, *p)
+
+
+@pytest.mark.parametrize("order", ["aabb", "bbaa", "abab", "baab", "abba"])
+def test_landmarks_clicked_view_by_view_pair_in_click_order(order: str) -> None:
+    """Issue 46 item 1: two landmarks clicked in one view, then their partners in the
+    other, pair first with first (the second click in A replaced the first, which still
+    waited, and the B clicks were paired with the wrong points)."""
+    X = np.array([[5.0, -10.0, 20.0], [-20.0, 15.0, -10.0]])
+    px = {"a": VIEW_A.project(X), "b": VIEW_B.project(X)}
+    st = _state()
+    _ends(st)
+    used = {"a": 0, "b": 0}
+    for view in order:
+        st.click(view, *px[view][used[view]])
+        used[view] += 1
+    feats = st.to_seeds().features
+    assert len(feats) == 2 and st.missing() == []
+    for f, k in zip(feats, (0, 1), strict=True):
+        np.testing.assert_allclose(f.a_px, px["a"][k])
+        np.testing.assert_allclose(f.b_px, px["b"][k])
+    assert all(st.pairing_doubt(m) is None for m in st.marks)
+
+
+def test_the_guide_names_the_landmarks_waiting_and_which_pairs_next() -> None:
+    st = _state()
+    _ends(st)
+    st.click("a", 200, 210)
+    st.click("a", 300, 310)
+    text = st.guide_text()
+    assert "Landmarks F1, F2 wait for their partners in B" in text
+    assert "pairs with F1" in text
+    assert st.waiting_landmarks("a") == [0, 1]
+    # the magenta line drawn in B is F1's, the landmark the next B click pairs with
+    line = epipolar_lines(np.array([[200.0, 210.0]]), VIEW_A, VIEW_B)[0]
+    view, seg = st.epipolar_segment()
+    assert view == "b"
+    for p in seg:
+        assert abs(line @ [*p, 1.0]) / np.hypot(*line[:2]) < 1e-6
+
+
+def test_a_landmark_clicked_again_on_its_place_is_not_a_second_pair() -> None:
+    st = _state()
+    _ends(st)
+    st.click("a", 200, 210)
+    st.click("b", 220, 230)
+    st.click("a", 202, 211)  # the same branch point, clicked again in A
+    st.click("b", 221, 232)  # ... and in B
+    feats = st.to_seeds().features
+    assert feats == (Feature("feature 1", (202, 211), (221, 232)),)
+
+
+def test_a_landmark_paired_out_of_order_is_doubted() -> None:
+    """Two landmarks in A, then F2's partner clicked first in B: it pairs with F1 (click
+    order), and the state says it lies on F2's line instead."""
+    X = np.array([[5.0, -10.0, 20.0], [-20.0, 15.0, -10.0]])
+    pa, pb = VIEW_A.project(X), VIEW_B.project(X)
+    st = _state()
+    _ends(st)
+    st.click("a", *pa[0])
+    st.click("a", *pa[1])
+    mark = st.click("b", *pb[1])  # F2's partner, paired with F1
+    assert st.partner(mark).point_px == pytest.approx(tuple(pa[0]))
+    doubt = st.pairing_doubt(mark)
+    assert doubt is not None and "F2's" in doubt and "Undo" in doubt
+
+
+def test_a_mark_moved_and_deleted_with_undo() -> None:
+    st = _state()
+    _ends(st)
+    distal = next(m for m in st.marks if m.kind == "distal" and m.view == "a")
+    moved = st.move_mark(distal.id, 150.0, 160.0)
+    assert (moved.id, moved.kind, moved.group) == (distal.id, "distal", 0)
+    assert moved.point_px == (150.0, 160.0) and st.selected_id == distal.id
+    assert st.to_seeds().segments[0].a_px[-1] == (150.0, 160.0)
+    # a drag: the first move is the undo step, the later ones are not
+    st.move_mark(distal.id, 151.0, 161.0)
+    st.move_mark(distal.id, 152.0, 162.0, snap=False, undoable=False)
+    assert st.undo() and st.mark_by_id(distal.id).point_px == (150.0, 160.0)
+    assert st.undo() and st.mark_by_id(distal.id).point_px == distal.point_px
+    st.select(distal.id)
+    gone = st.delete_mark()
+    assert gone.id == distal.id and st.mark_by_id(distal.id) is None
+    assert st.selected_id is None and "Segment 1: distal end missing in A" in st.missing()
+    assert st.undo() and st.mark_by_id(distal.id) == distal
+    st.select(None)
+    with pytest.raises(ValueError, match="select a mark first"):
+        st.delete_mark()
+    with pytest.raises(ValueError, match="no mark with id 999"):
+        st.move_mark(999, 1.0, 1.0)
