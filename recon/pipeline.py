@@ -19,6 +19,7 @@ The output files (centerline CSV, report JSON, meshes) are written by
 
 from __future__ import annotations
 
+import functools
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -46,6 +47,7 @@ from recon.lumen import (
     with_fill_ratios,
 )
 from recon.lumen.ffr import FFRModel, FFRResult, vessel_ffr
+from recon.lumen.lesions import LesionReport, lesion_report
 from recon.pose import (
     CORRECTIONS,
     CalibrationResult,
@@ -177,6 +179,14 @@ class Reconstruction:
     # FFR along the segment (recon.lumen.ffr; a model estimate for research), or None
     ffr: FFRResult | None = None
 
+    @functools.cached_property
+    def lesions(self) -> LesionReport:
+        """Every lesion of the segment (lesion 1, 2, ... proximal to distal) with its 95 %
+        intervals from the intervals' draws, and which is the primary one, the one of
+        ``measurements`` (:func:`recon.lumen.lesions.lesion_report`)."""
+        return lesion_report(self.profile, () if self.intervals is None
+                             else self.intervals.profiles)
+
     def report(self) -> dict:
         """JSON-ready report: inputs, geometry, calibration, matching, measurements, timings."""
         cal = self.calibration
@@ -243,6 +253,9 @@ class Reconstruction:
                 if self.intervals is not None else None
             ),
             "ffr": self.ffr.to_dict() if self.ffr is not None else None,
+            # every lesion with its intervals, and whether "the" lesion stands out
+            "lesions": self.lesions.lesion_list(),
+            "lesion_assessment": self.lesions.assessment(),
             "uncertainty": _uncertainty_report(self.intervals),
             # how each view's stored values were taken to relate to attenuation, and why
             "intensity": {

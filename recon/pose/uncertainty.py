@@ -324,6 +324,8 @@ COMMON_RADIUS_SD_PX = 0.15
 #: into mm of the segment's length (:func:`_end_draws`).
 END_STRETCH_MM = 2.0
 _RADIUS_LOCAL_WINDOW_MM = 5.0
+#: Figures that are places along the centerline (their intervals stay on the segment).
+_SITE_KEYS = ("mld_s_mm", "lesion_start_s_mm", "lesion_end_s_mm")
 
 
 @dataclass(frozen=True, eq=False)
@@ -437,6 +439,7 @@ def measurement_intervals(
     flagged_a: NDArray[np.bool_] | None = None,
     flagged_b: NDArray[np.bool_] | None = None,
     measure_from_s_mm: float | None = None,
+    ostium_end_s_mm: float | None = None,
 ) -> MeasurementIntervals:
     """95 % intervals by sampling the pose posterior and the 2D radius error.
 
@@ -476,6 +479,8 @@ def measurement_intervals(
     ``measure_from_s_mm``: measure each draw, as ``measurements`` were measured, only
     from this arc length of ``centerline`` on (a branch's QCA from its carina on,
     :mod:`recon.tree`); the radius intervals still cover every point.
+    ``ostium_end_s_mm``: the branch's ostium zone ends there (as ``measurements`` were
+    measured, :func:`recon.lumen.measure.lumen_profile`).
     """
     from recon.correspond.triangulation import radius_mm_eq11
     from recon.geometry import triangulate
@@ -546,7 +551,7 @@ def measurement_intervals(
     profiles = []
     for cl, area in zip(draws, areas, strict=False):
         s_kept = cl.s_mm[keep] - cl.s_mm[keep][0] + s0[keep][0]  # arc lengths as reported
-        profiles.append(lumen_profile(s_kept, area[keep]))
+        profiles.append(lumen_profile(s_kept, area[keep], ostium_end_s_mm=ostium_end_s_mm))
         m = measure_lumen(profiles[-1])
         found += m.has_lesion
         for key, v in m.to_dict().items():
@@ -564,6 +569,8 @@ def measurement_intervals(
         lo, hi = nominal[key] - CI_Z * sd, nominal[key] + CI_Z * sd
         if not key.endswith("_pct"):
             lo = max(lo, 0.0)
+        if key in _SITE_KEYS:  # a place on the measured stretch stays on it
+            lo, hi = max(lo, float(s0[keep][0])), min(hi, float(s0[keep][-1]))
         ci[key] = (float(lo), float(hi))
     r0 = np.sqrt(areas[-1] / np.pi)
     r_sd = np.std(radii, axis=0, ddof=1)

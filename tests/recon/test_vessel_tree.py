@@ -53,8 +53,11 @@ def test_lesions_are_measured_on_every_branch_and_view_b_beats_its_header(tree_c
         mld_true, ref_true = _branch_truth(tc, j)
         if mld_true < 0.75 * ref_true:  # the main's and the narrowed ostium's
             lesions += 1
-            assert branch.measurements.mld_mm == pytest.approx(mld_true, abs=0.2)
-            assert branch.measurements.reference_diameter_mm == pytest.approx(ref_true, abs=0.3)
+            m = branch.measurements
+            if j > 0 and not m.has_lesion:  # inside the ostium zone: listed, not confirmed
+                (m,) = [n for n in branch.lesions.unsupported if n.zone == "ostium"]
+            assert m.mld_mm == pytest.approx(mld_true, abs=0.2)
+            assert m.reference_diameter_mm == pytest.approx(ref_true, abs=0.3)
         # every branch's 3D centerline lies on its vessel in both views
         assert branch.metrics["a"]["rms_px"] < 2.0 and branch.metrics["b"]["rms_px"] < 2.0
     assert lesions >= 2
