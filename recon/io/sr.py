@@ -23,7 +23,13 @@ MLA                        DCM 122480 Vessel Lumen Cross-Sectional      mm2
                            Area (derivation Minimum)
 lesion length              SCT 408716009 Stenotic Lesion Length         mm
 segment length             DCM 122510 Length Luminal Segment            mm
+FFR (model estimate)       SCT 371842003 Fractional flow reserve        {ratio}
+                           (method SCT 128576006 Computed hemodynamic
+                           measurement method)
 =========================  ===========================================  ======
+
+The FFR is the distal value of :mod:`recon.lumen.ffr`'s model, for research, not
+measured with a pressure wire: its method says that it was computed.
 
 When the report carries 95 % intervals (``report["measurements_ci95"]``,
 a ``{key: [low, high]}`` per measurement key), each measurement gets them
@@ -86,6 +92,8 @@ SR_MEASUREMENTS = {
     ),
     "lesion_length_mm": (codes.SCT.StenoticLesionLength, codes.UCUM.Millimeter, None, None),
     "segment_length_mm": (codes.DCM.LengthLuminalSegment, codes.UCUM.Millimeter, None, None),
+    "ffr": (codes.SCT.FractionalFlowReserve, codes.UCUM.Ratio, None,
+            codes.SCT.ComputedHemodynamicMeasurementMethod),
 }
 
 # Type 2 attributes highdicom reads from the first evidence dataset; a file that
@@ -179,6 +187,8 @@ def measurement_report_sr(report: dict, sources: SRSources) -> bytes:
     intervals = report.get("measurements_ci95") or {}
     measurements = []
     for key, (concept, unit, derivation, method) in SR_MEASUREMENTS.items():
+        if values.get(key) is None:  # a report without the FFR
+            continue
         value = float(values[key])
         properties = None
         if key in intervals:

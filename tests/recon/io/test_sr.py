@@ -27,6 +27,8 @@ EXPECTED = {
     "mla_mm2": ("122480", "DCM", "mm2", "255605001", None),
     "lesion_length_mm": ("408716009", "SCT", "mm", None, None),
     "segment_length_mm": ("122510", "DCM", "mm", None, None),
+    # the model's FFR (recon.lumen.ffr), its method "computed" (not a wire's)
+    "ffr": ("371842003", "SCT", "{ratio}", None, "128576006"),
 }
 UPPER_UNCERTAINTY, LOWER_UNCERTAINTY = "371886008", "371885007"  # SCT, TID 310
 
