@@ -32,6 +32,13 @@ over the N runs) of the MLD, the %DS and the MLD site (mm along the 3D
 centerline), and the fraction of cases with an MLD spread of at most
 :data:`STABLE_MLD_SPREAD_MM` and a site spread of at most
 :data:`STABLE_SITE_SPREAD_MM` (a case with a failed run is not stable).
+``lesion_set_stable`` is the fraction of cases whose set of lesions
+(:mod:`recon.lumen.lesions`: every narrowing that passes the lesion criterion) is
+the same in the base run and all N jittered runs
+(:func:`recon.lumen.lesions.lesion_sets_equal`: as many, each one's MLD inside the
+other's extent; a case with a failed run is not stable). ``lesion_set_stable_delta``
+is the same figure had every narrowing of at least the disease threshold delta
+been a lesion (no % stenosis floor), to show what the floor buys.
 """
 
 from __future__ import annotations
@@ -55,6 +62,7 @@ from recon.bench.common import (
     scale_free_rms_mm,
     varied_rows,
 )
+from recon.lumen.lesions import lesion_sets_equal
 from recon.pipeline import Reconstruction, ReconstructionOptions, reconstruct_pair
 from recon.synth import PhantomCase, PhantomTruth, make_phantom
 
@@ -83,6 +91,7 @@ def evaluate_case(case: PhantomCase, options: ReconstructionOptions, *,
         row["consistency_ok"] = None if consistency is None else bool(consistency.ok)
         row["flagged_stretches"] = 0 if consistency is None else len(consistency.stretches)
         row["warnings"] = list(getattr(rec, "warnings", ()))
+        row["lesions"], row["lesions_delta"] = _lesion_sets(rec)
         row.update(_trace_figures(case, rec))
         row["mappings"] = [getattr(rec.centerline_a, "intensity_mapping", None),
                            getattr(rec.centerline_b, "intensity_mapping", None)]
@@ -109,6 +118,20 @@ def _trace_figures(case: PhantomCase, rec: Reconstruction) -> dict:
         out[f"trace_lost_{name}"] = lost
         out[f"trace_lost_unflagged_{name}"] = lost and not flagged
     return out
+
+
+def _lesion_sets(rec: Reconstruction) -> tuple[list[dict], list[dict]]:
+    """The run's lesions (their sites, extents and %DS), and those it would have with
+    every supported narrowing of at least delta a lesion (no % stenosis floor)."""
+    from recon.lumen.measure import narrowings
+
+    def brief(n) -> dict:
+        return {"mld_s_mm": round(n.mld_s_mm, 2), "start_s_mm": round(n.start_s_mm, 2),
+                "end_s_mm": round(n.end_s_mm, 2),
+                "diameter_stenosis_pct": round(n.diameter_stenosis_pct, 1)}
+
+    return ([brief(les.narrowing) for les in rec.lesions.lesions],
+            [brief(n) for n in narrowings(rec.profile, min_ds_pct=0.0) if n.supported])
 
 
 def closed_truth_volume_mm3(truth: PhantomTruth) -> float:
@@ -357,16 +380,19 @@ def _jitter_case(case: PhantomCase, options: ReconstructionOptions, n: int,
     a, b = case_angiograms(case)
     rng = np.random.default_rng([case.seed, 7919, n])
     mld, ds, site, errors = [], [], [], []
+    sets = [] if base is None else [(base["lesions"], base["lesions_delta"])]
     for _ in range(n):
         seeds = jitter_seeds(case.seeds, rng, JITTER_PX, a.shape, b.shape)
         try:
-            m = reconstruct_pair(a, b, seeds, options).measurements
+            rec = reconstruct_pair(a, b, seeds, options)
         except ValueError as err:
             errors.append(_one_line(err))
             continue
+        m = rec.measurements
         mld.append(m.mld_mm)
         ds.append(m.diameter_stenosis_pct)
         site.append(m.mld_s_mm)
+        sets.append(_lesion_sets(rec))
 
     def spread(v: list[float]) -> float:
         return float(np.ptp(v)) if v else float("nan")
@@ -387,6 +413,12 @@ def _jitter_case(case: PhantomCase, options: ReconstructionOptions, n: int,
     out["mld_stable"] = bool(all_ran and out["mld_spread_mm"] <= STABLE_MLD_SPREAD_MM)
     out["site_stable"] = bool(all_ran and out["site_spread_mm"] <= STABLE_SITE_SPREAD_MM)
     out["stable"] = out["mld_stable"] and out["site_stable"]
+    out["lesion_counts"] = [len(les) for les, _ in sets]
+    out["lesion_sets"] = [les for les, _ in sets]
+    out["lesion_sets_delta"] = [les for _, les in sets]
+    for key, k in (("lesion_set_stable", 0), ("lesion_set_stable_delta", 1)):
+        out[key] = bool(all_ran and base is not None
+                        and all(lesion_sets_equal(sets[0][k], other[k]) for other in sets[1:]))
     return out
 
 
@@ -405,7 +437,15 @@ def _stability_figures(cases: list[dict]) -> dict:
         "ds_spread_pct_max": percentile([c["ds_spread_pct"] for c in cases], 100),
         "site_spread_mm_median": median(c["site_spread_mm"] for c in cases),
         "site_spread_mm_max": percentile([c["site_spread_mm"] for c in cases], 100),
+        "lesion_set_stable": _fraction(cases, "lesion_set_stable"),
+        "lesion_set_stable_delta": _fraction(cases, "lesion_set_stable_delta"),
+        "lesions_per_run_median": median(n for c in cases for n in c.get("lesion_counts", [])),
     }
+
+
+def _fraction(cases: list[dict], key: str) -> float:
+    """Share of ``cases`` with ``key`` true (NaN for none)."""
+    return float(np.mean([bool(c.get(key)) for c in cases])) if cases else float("nan")
 
 
 def _stability_summary(cases: list[dict]) -> dict:
@@ -418,6 +458,7 @@ def _stability_summary(cases: list[dict]) -> dict:
         "criteria": {"mld_spread_mm": STABLE_MLD_SPREAD_MM,
                      "site_spread_mm": STABLE_SITE_SPREAD_MM},
         "target_stable_fraction": 0.9,
+        "target_lesion_set_stable": 0.9,
         "overall": _stability_figures(cases),
         "chains": chains,
         "cases": cases,
@@ -537,12 +578,16 @@ def _format_stability(st: dict) -> list[str]:
     lines = ["", f"click stability: {st['jitter_runs']} runs per case, every click moved "
              f"up to {st['jitter_px']:g} px (spreads: max - min; medians unless 'max')",
              f"{'':<22}{'cases':>6}{'stable':>8}{'MLD<=0.1':>9}{'site<=2':>8}"
-             f"{'MLD spr':>8}{'max':>7}{'%DS spr':>8}{'site spr':>9}{'max':>7}{'fail':>5}"]
+             f"{'MLD spr':>8}{'max':>7}{'%DS spr':>8}{'site spr':>9}{'max':>7}{'fail':>5}"
+             f"{'lesions':>8}{'(delta)':>8}"]
     for name, f in [*st["chains"].items(), ("overall", st["overall"])]:
         lines.append(
             f"{name:<22}{f['cases']:>6}{f['stable_fraction']:>8.2f}"
             f"{f['mld_within_fraction']:>9.2f}{f['site_within_fraction']:>8.2f}"
             f"{f['mld_spread_mm_median']:>8.3f}{f['mld_spread_mm_max']:>7.2f}"
             f"{f['ds_spread_pct_median']:>8.1f}{f['site_spread_mm_median']:>9.2f}"
-            f"{f['site_spread_mm_max']:>7.1f}{f['cases_with_failed_runs']:>5}")
+            f"{f['site_spread_mm_max']:>7.1f}{f['cases_with_failed_runs']:>5}"
+            f"{f['lesion_set_stable']:>8.2f}{f['lesion_set_stable_delta']:>8.2f}")
+    lines.append("lesions: the share of cases whose set of lesions is the same in every run "
+                 "(delta: had every narrowing past the disease threshold been a lesion)")
     return lines

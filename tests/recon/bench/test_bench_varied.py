@@ -126,9 +126,21 @@ def test_bench_reconstruct_varied_keys_and_stability(tiny_suite):
     st = result["stability"]
     assert st["jitter_px"] == 2.0 and len(st["cases"]) == 2
     for key in ("stable_fraction", "mld_spread_mm_median", "ds_spread_pct_median",
-                "site_spread_mm_median"):
+                "site_spread_mm_median", "lesion_set_stable", "lesion_set_stable_delta"):
         assert key in st["overall"]
     assert "click stability" in reconstruct.format_table(result)
+    # issue 46: each case's lesion sets, base run first, and whether they are all the same
+    from recon.lumen.lesions import lesion_sets_equal
+
+    for case in st["cases"]:
+        sets = case["lesion_sets"]
+        assert len(sets) == case["runs"] + (not case["base_failed"])
+        same = all(lesion_sets_equal(sets[0], other) for other in sets[1:])
+        assert case["lesion_set_stable"] == (same and case["failed_runs"] == 0
+                                             and not case["base_failed"])
+        assert all(les["end_s_mm"] > les["start_s_mm"] for run in sets for les in run)
+    assert st["overall"]["lesion_set_stable"] == np.mean(
+        [c["lesion_set_stable"] for c in st["cases"]])
 
 
 def test_final_traces_are_judged_against_the_truth_and_a_silent_loss_is_counted():
