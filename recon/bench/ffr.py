@@ -45,7 +45,7 @@ from recon.synth import make_phantom
 
 CASES = 8  # regular-suite cases when run(cases=None)
 VARIED_PER_CHAIN = 8  # varied-suite cases per imaging chain when run(cases=None)
-STENOSIS_PCT_RANGE = (30.0, 70.0)  # each case's diameter stenosis, uniform
+STENOSIS_PCT_RANGE = (35.0, 75.0)  # each case's diameter stenosis, uniform (docs/ffr.md: why)
 CUTOFF = 0.80  # the FFR decision threshold
 TUBE_RADIUS_MM = 1.5
 TUBE_LENGTH_MM = 40.0
