@@ -109,6 +109,8 @@ class ViewerApp(RunCommands):
         self.reconstruction: Result | None = None  # one segment's, or a tree's (all segments)
         self.shown_branch = 0  # index in its branches of the one the results panel shows
         self.calibration: CalibrationResult | None = None
+        self.calibration_seeds: Seeds | None = None  # the marks it is of
+        self._shown_stale = False
         self.progress_log: list[tuple[str, float]] = []
         self._tmpdir = tempfile.TemporaryDirectory(prefix="coronary3d-viewer-")
         self._busy = False
@@ -238,7 +240,7 @@ class ViewerApp(RunCommands):
             self.views = {"a": View("a", angio_a, name_a), "b": View("b", angio_b, name_b)}
             self.state = MarkState(angio_a.geometry, angio_b.geometry, snapper=self._snap)
             self.reconstruction = None
-            self.calibration = None
+            self.calibration, self.calibration_seeds = None, None
             self.model = None
             if seeds is not None:
                 self.state.load_seeds(seeds)
@@ -500,8 +502,13 @@ class ViewerApp(RunCommands):
         return bool(self._edit_marks("Undo", None, self.state.undo))
 
     def clear(self) -> None:
-        self._edit_marks("Clear marks", None, self.state.clear)
-        scene.draw_refusal(self.server.scene, self.views, None)  # its marks are gone
+        """Remove every mark (undoable) and every result of them: nothing of an earlier
+        reconstruction or calibration stays on the page."""
+        def change() -> None:
+            self.state.clear()
+            self._drop_results()
+
+        self._edit_marks("Clear marks", None, change)
 
     @property
     def epipolar_segments(self) -> dict[str, FloatArray | None]:
@@ -514,9 +521,11 @@ class ViewerApp(RunCommands):
             return out
 
     def _redraw_marks(self) -> None:
-        """Marks, labels, selection and epipolar line in the scene; the marks panel."""
+        """Marks, labels, selection and epipolar line in the scene; the marks panel;
+        results of earlier marks said to be out of date."""
         scene.draw_marks(self.server.scene, self.views, self.state)
         self.panels.show_marks(self.state, self.last_click_ms, self.autosave.path)
+        self._show_staleness()
 
     # ================================================================ seeds
     def seeds(self) -> Seeds:

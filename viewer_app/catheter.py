@@ -20,7 +20,7 @@ if TYPE_CHECKING:
     import viser
 
     from viewer_app.commands import Guard, Notify
-    from viewer_app.panels import GeometryPanel
+    from viewer_app.folders import GeometryPanel
     from viewer_app.scene import View
 
 __all__ = ["CatheterTool"]

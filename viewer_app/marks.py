@@ -1,4 +1,5 @@
-"""A mark: one click placed on an angiogram, and the click modes that place them.
+"""A mark: one click placed on an angiogram, the click modes that place them, and the
+visible part of a mark's epipolar line.
 
 Below :mod:`viewer_app.state` (which keeps the marks of a pair) and the modules that
 draw or describe marks. Pixel coordinates are (col, row), 0-based.
@@ -9,6 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 __all__ = [
     "KIND_WORDS",
@@ -19,6 +21,7 @@ __all__ = [
     "VIEWS",
     "Mark",
     "check_view",
+    "clip_line_to_image",
     "mark_from_entry",
     "other_view",
 ]
@@ -36,6 +39,8 @@ KIND_WORDS = {"proximal": "proximal end", "distal": "distal end", "feature": "la
               "waypoint": "waypoint"}
 VIEWS: tuple[str, str] = ("a", "b")
 MAX_GROUPS = 1000  # segments or features of one pair (seeds files hold at most 100 / 1000)
+
+FloatArray = NDArray[np.float64]
 
 
 def other_view(view: str) -> str:
@@ -111,3 +116,38 @@ def mark_from_entry(entry: object) -> Mark | None:
         return None
     return mark
 
+
+def clip_line_to_image(line: ArrayLike, cols: int, rows: int) -> FloatArray | None:
+    """Clip a line a col + b row + c = 0 to the image rectangle.
+
+    Parameters
+    ----------
+    line : (3,) line coefficients (a, b, c).
+    cols, rows : image size; the rectangle spans [-0.5, cols - 0.5] x [-0.5, rows - 0.5].
+
+    Returns
+    -------
+    (2, 2) end points (col, row) of the visible part, or None if the line
+    misses the image.
+    """
+    a, b, c = (float(x) for x in np.asarray(line, dtype=float).reshape(3))
+    lo_c, hi_c, lo_r, hi_r = -0.5, cols - 0.5, -0.5, rows - 0.5
+    cand: list[tuple[float, float]] = []
+    if abs(b) > 1e-12:  # intersections with the left and right borders
+        for col in (lo_c, hi_c):
+            cand.append((col, -(a * col + c) / b))
+    if abs(a) > 1e-12:  # intersections with the top and bottom borders
+        for row in (lo_r, hi_r):
+            cand.append((-(b * row + c) / a, row))
+    eps = 1e-9
+    pts = np.array(
+        [p for p in cand if lo_c - eps <= p[0] <= hi_c + eps and lo_r - eps <= p[1] <= hi_r + eps]
+    ).reshape(-1, 2)
+    if len(pts) < 2:
+        return None
+    direction = np.array([-b, a])  # along the line
+    t = pts @ direction
+    seg = np.stack([pts[np.argmin(t)], pts[np.argmax(t)]])
+    if np.linalg.norm(seg[1] - seg[0]) < 1e-9:
+        return None
+    return seg

@@ -45,6 +45,8 @@ class RunCommands:
     limits: tuple[float | None, float | None]
     reconstruction: Result | None
     calibration: CalibrationResult | None
+    calibration_seeds: Seeds | None  # the marks the calibration shown is of
+    _shown_stale: bool  # whether the page marks the results as out of date
     model: ModelNodes | None
     lesion: dict[str, float] | None
     shown_branch: int
@@ -74,7 +76,7 @@ class RunCommands:
                                        vesselness=maps,
                                        intensity=(self.intensity["a"], self.intensity["b"]))
             with self._lock:
-                self.calibration = res
+                self.calibration, self.calibration_seeds = res, seeds
                 self.state.set_calibrated_b(res.view_b)
                 self.panels.show_calibration(res)
                 self._redraw_marks()
@@ -108,11 +110,16 @@ class RunCommands:
             with self._lock:
                 seeds, segment = tree_view.seeds_for_run(self.state)
                 view_a, view_b = self.views["a"], self.views["b"]
-            rec = tree_view.run_reconstruction(view_a, view_b, seeds, segment, self.intensity,
-                                               self.limits, progress)
+            try:
+                rec = tree_view.run_reconstruction(view_a, view_b, seeds, segment,
+                                                   self.intensity, self.limits, progress)
+            except Exception:  # nothing of an earlier run stays shown as if it were this one's
+                with self._lock:
+                    self._drop_results(keep_calibration=True)
+                raise
             with self._lock:
                 self.reconstruction = rec
-                self.calibration = rec.calibration
+                self.calibration, self.calibration_seeds = rec.calibration, rec.seeds
                 self.state.set_calibrated_b(tree_view.branches_of(rec)[0].view_b)
                 self.state.select(None)  # no guide line across the results
                 self.panels.show_calibration(rec.calibration)
@@ -136,9 +143,43 @@ class RunCommands:
 
     def _clear_results(self) -> None:
         scene.clear_results(self.server.scene, self.views)
+        tree_view.draw_out_of_date(self.server.scene, self.views, None, False)
+        self._shown_stale = False
         self.model = None
         self.lesion = None
         self.panels.clear_results()
+
+    def _drop_results(self, keep_calibration: bool = False) -> None:
+        """Remove every result from the page: the model, traces, MLD and lesion marks,
+        off-vessel tags, tables and chart, and the calibration (its figures and warnings;
+        view B back to its header geometry) unless ``keep_calibration`` and it is of the
+        marks shown. After Clear marks and after a failed Reconstruct."""
+        current = keep_calibration and not self._calibration_stale()
+        self.reconstruction = None
+        self._clear_results()
+        if current and self.calibration is not None:
+            self.panels.show_calibration(self.calibration)
+        else:
+            self.calibration, self.calibration_seeds = None, None
+            self.state.set_calibrated_b(None)
+        self.set_layout("Angiograms")
+
+    def _calibration_stale(self) -> bool:
+        seeds = self.calibration_seeds
+        return seeds is not None and tree_view.marks_key(seeds) != tree_view.marks_key(
+            self.state.to_seeds())
+
+    def _show_staleness(self) -> None:
+        """Mark the results and the calibration shown as out of date when the marks
+        changed after them (in the panels, over the images and beside the model), or
+        remove the marking when they are of the marks shown again (an Undo)."""
+        rec = self.reconstruction
+        stale = rec is not None and tree_view.marks_key(rec.seeds) != tree_view.marks_key(
+            self.state.to_seeds())
+        self.panels.show_stale(stale, self._calibration_stale())
+        if stale != self._shown_stale:
+            tree_view.draw_out_of_date(self.server.scene, self.views, self.model, stale)
+            self._shown_stale = stale
 
     def _show_reconstruction(self, rec: Result) -> None:
         """Traces, back-projections and lesion marks on the images, the coloured mesh (a

@@ -32,7 +32,7 @@ from collections.abc import Callable
 from dataclasses import replace
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import NDArray
 
 from recon.geometry import ViewGeometry, epipolar_lines
 from recon.seeds import MAX_NAME_CHARS, Feature, Seeds, Segment, seeds_from_dict
@@ -44,6 +44,7 @@ from viewer_app.marks import (
     VIEWS,
     Mark,
     check_view,
+    clip_line_to_image,
     mark_from_entry,
     other_view,
 )
@@ -69,42 +70,6 @@ PAIRING_DOUBT_PX = 12.0
 # A snapper takes (view, raw click (2,)) and returns (placed point (2,), snap distance in
 # px or None when the click was kept raw, a one-line message for the user or None).
 Snapper = Callable[[str, FloatArray], tuple[FloatArray, float | None, str | None]]
-
-
-def clip_line_to_image(line: ArrayLike, cols: int, rows: int) -> FloatArray | None:
-    """Clip a line a col + b row + c = 0 to the image rectangle.
-
-    Parameters
-    ----------
-    line : (3,) line coefficients (a, b, c).
-    cols, rows : image size; the rectangle spans [-0.5, cols - 0.5] x [-0.5, rows - 0.5].
-
-    Returns
-    -------
-    (2, 2) end points (col, row) of the visible part, or None if the line
-    misses the image.
-    """
-    a, b, c = (float(x) for x in np.asarray(line, dtype=float).reshape(3))
-    lo_c, hi_c, lo_r, hi_r = -0.5, cols - 0.5, -0.5, rows - 0.5
-    cand: list[tuple[float, float]] = []
-    if abs(b) > 1e-12:  # intersections with the left and right borders
-        for col in (lo_c, hi_c):
-            cand.append((col, -(a * col + c) / b))
-    if abs(a) > 1e-12:  # intersections with the top and bottom borders
-        for row in (lo_r, hi_r):
-            cand.append((-(b * row + c) / a, row))
-    eps = 1e-9
-    pts = np.array(
-        [p for p in cand if lo_c - eps <= p[0] <= hi_c + eps and lo_r - eps <= p[1] <= hi_r + eps]
-    ).reshape(-1, 2)
-    if len(pts) < 2:
-        return None
-    direction = np.array([-b, a])  # along the line
-    t = pts @ direction
-    seg = np.stack([pts[np.argmin(t)], pts[np.argmax(t)]])
-    if np.linalg.norm(seg[1] - seg[0]) < 1e-9:
-        return None
-    return seg
 
 
 class MarkState:
@@ -174,6 +139,7 @@ class MarkState:
         if not self._history:
             return False
         self._guide_id = None
+        self.last_message = None  # it was about a click this undoes, or an earlier one
         (
             self.marks,
             self.segment_names,
@@ -187,6 +153,7 @@ class MarkState:
     def clear(self) -> None:
         """Remove all marks (undoable)."""
         self._push()
+        self.last_message = None
         self.marks = []
         self.segment_names = ["Segment 1"]
         self.segment_links = {}
@@ -487,6 +454,7 @@ class MarkState:
             raise ValueError("Delete: select a mark first (click it, drag it, or pick it "
                              "under 'Selected mark')")
         self._push()
+        self.last_message = None
         self.marks = [m for m in self.marks if m.id != mark.id]
         self.selected_id, self._guide_id = None, None
         return mark
@@ -618,6 +586,7 @@ class MarkState:
     def load_seeds(self, seeds: Seeds) -> None:
         """Replace the marks by those of ``seeds`` (undoable); points are not re-snapped."""
         self._push()
+        self.last_message = None
         marks: list[Mark] = []
         next_id = 1
 

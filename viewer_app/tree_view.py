@@ -58,9 +58,11 @@ __all__ = [
     "branch_names",
     "branches_of",
     "draw_result",
+    "draw_out_of_date",
     "draw_tree",
     "highlight_branch",
     "is_tree",
+    "marks_key",
     "mesh_colors",
     "name_place",
     "renamed",
@@ -207,6 +209,34 @@ def draw_result(scene: viser.SceneApi, views: Mapping[str, View], result: Result
     else:
         model = draw_reconstruction(scene, views, result)
     return model, shown
+
+
+def marks_key(seeds: Seeds) -> tuple:
+    """What of ``seeds`` a result depends on: every complete segment's and landmark's
+    clicked points, in order (not their names: a rename changes no figure)."""
+    return (tuple((s.a_px, s.b_px, s.parent is not None) for s in seeds.segments),
+            tuple((f.a_px, f.b_px) for f in seeds.features))
+
+
+def draw_out_of_date(scene: viser.SceneApi, views: Mapping[str, View],
+                     model: ModelNodes | None, stale: bool) -> None:
+    """A line over each image and above the model saying that the traces, MLD and model
+    shown are of earlier marks (``stale``), or none."""
+    names = [f"{overlay_name(k)}/out_of_date" for k in views] + ["/model/out_of_date"]
+    for name in names:
+        scene.remove_by_name(name)
+    if not stale:
+        return
+    for v in views.values():  # inside the image's top right corner, clear of its title
+        scene.add_label(f"{overlay_name(v.key)}/out_of_date",
+                        "⚠ OUT OF DATE: trace and MLD of earlier marks",
+                        position=(v.render_w / 2 - 0.01, -v.render_h / 2 + 0.01,
+                                  OVERLAY_Z * 2.0), anchor="top-right")
+    if model is not None:  # left of the model's box, where the page has room
+        at = np.asarray(model.position, float) - [MODEL_SIZE / 2 + 0.02, 0.0, 0.0]
+        scene.add_label("/model/out_of_date", "⚠ OUT OF DATE\nthe marks changed after this "
+                        "model:\npress Reconstruct", position=(float(at[0]), float(at[1]), 0.0),
+                        anchor="center-right")
 
 
 def name_place(end_xy: NDArray[np.float64], name: str, marks_xyz: NDArray

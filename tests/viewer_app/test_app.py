@@ -393,6 +393,52 @@ def test_a_refused_trace_is_ringed_where_it_asks_for_a_waypoint(app: ViewerApp) 
     assert app.server.scene.get_handle_by_name("/over_a/refusal") is None
 
 
+def test_results_of_earlier_marks_are_marked_and_a_failed_run_removes_them(
+        app: ViewerApp) -> None:
+    """Issue 46 item 2: a mark added after Reconstruct marks the results and the
+    calibration out of date (panels, over both images, beside the model) and its Undo
+    unmarks them; a failed Reconstruct removes every result of before (model, traces,
+    MLD, off-vessel tags, tables, chart, calibration), its refusal ring staying."""
+    from dataclasses import replace
+
+    from recon.seeds import Seeds
+    from viewer_app.results import NO_RECONSTRUCTION_TEXT, NOT_CALIBRATED_TEXT
+
+    scene_ = app.server.scene
+    seeds = app.seeds()
+    assert app.reconstruct() is not None
+    results, calibrate = app.panels.results, app.panels.calibrate
+    assert not results.stale.visible and not calibrate.stale.visible
+    assert scene_.get_handle_by_name("/over_a/out_of_date") is None
+    app.set_mode("waypoint")
+    assert app.click("a", 250.0, 250.0) is not None
+    assert results.stale.visible and "Out of date" in results.stale.content
+    assert calibrate.stale.visible
+    for name in ("/over_a/out_of_date", "/over_b/out_of_date", "/model/out_of_date"):
+        assert scene_.get_handle_by_name(name) is not None, name
+    assert app.undo()
+    assert not results.stale.visible and not calibrate.stale.visible
+    assert scene_.get_handle_by_name("/over_a/out_of_date") is None
+    assert scene_.get_handle_by_name("/model/out_of_date") is None
+
+    seg = seeds.segments[0]
+    a = seg.a_px  # the distal end clicked second: the trace is refused
+    app.load_seeds_upload(json.dumps(Seeds(segments=(replace(seg, a_px=(a[0], a[-1], a[1],
+                                                                       a[2])),),
+                                           features=seeds.features).to_dict()).encode())
+    assert app.reconstruct() is None
+    assert app.reconstruction is None and app.model is None and app.calibration is None
+    assert scene_.get_handle_by_name("/model") is None
+    for key in ("a", "b"):
+        assert len(app.views[key].nodes.trace.points) == 0
+        for name in ("lesion", "lesion_labels", "flagged", "flag_labels", "out_of_date"):
+            assert scene_.get_handle_by_name(f"/over_{key}/{name}") is None, name
+    assert results.clinical.content == NO_RECONSTRUCTION_TEXT and not results.plot.visible
+    assert calibrate.markdown.content == NOT_CALIBRATED_TEXT
+    assert not results.stale.visible and app.layout == "Angiograms"
+    assert scene_.get_handle_by_name("/over_a/refusal") is not None
+
+
 def test_the_current_segment_is_renamed_from_the_name_field(app: ViewerApp) -> None:
     """The Name field shows the current segment's name; Rename segment renames it (a taken
     name is a notification, the field keeping what was typed), and a name being typed stays
@@ -416,22 +462,27 @@ def test_the_current_segment_is_renamed_from_the_name_field(app: ViewerApp) -> N
     assert app.state.segment_names == [app.seeds().segments[0].name] != ["LAD"]
 
 
-def test_a_rename_after_reconstruct_reaches_the_results_and_clearing_the_marks_does_not(
+def test_a_rename_after_reconstruct_reaches_the_results_and_clearing_the_marks_removes_them(
         app: ViewerApp) -> None:
-    """One segment reconstructed, then renamed: report.json names it as renamed; Clear
-    marks (whose one segment is called "Segment 1" again) leaves the results' name alone."""
+    """One segment reconstructed, then renamed: report.json names it as renamed (the
+    results stay current: a name changes no figure). Clear marks removes the results and
+    the calibration (issue 46 item 2); Undo brings the marks and their name back, not the
+    results of before."""
     rec = app.reconstruct()
     assert rec is not None, app.notifications[-3:]
-    old = rec.seeds.segments[0].name
     assert app.rename_segment("LAD") == "LAD"
     assert json.loads(app.export("report.json"))["inputs"]["segment"] == "LAD"
     assert app.reconstruction.seeds.segments[0].name == "LAD"
+    assert not app.panels.results.stale.visible
     app.clear()
-    assert app.state.segment_names == ["Segment 1"] != [old]
-    assert json.loads(app.export("report.json"))["inputs"]["segment"] == "LAD"
+    assert app.state.segment_names == ["Segment 1"]
+    assert app.reconstruction is None and app.calibration is None and app.model is None
+    assert app.state.view_b_calibrated is None  # epipolar lines of the header again
+    with pytest.raises(ValueError, match="reconstruct first"):
+        app.export("report.json")
     assert app.undo()  # the marks back, and the name their undo restores: LAD
     assert app.state.segment_names == ["LAD"]
-    assert json.loads(app.export("report.json"))["inputs"]["segment"] == "LAD"
+    assert app.reconstruction is None
 
 
 def test_a_catheter_found_is_drawn_dashed_and_reported(app: ViewerApp) -> None:

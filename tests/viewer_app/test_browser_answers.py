@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from browser_page import CHROMIUM, Browser, wait_for
+from browser_page import CHROMIUM, Browser, failed, wait_for
 
 from recon.geometry import ViewGeometry
 from viewer_app import ViewerApp
@@ -101,6 +101,84 @@ def test_landmarks_clicked_view_by_view_pair_in_order_on_the_page(
                                                                          timeout=10_000)
             assert "⚠" in app.panels.marks.summary.content
             b.shot("answers_3_landmark_pair_doubted.png")
+        finally:
+            b.close()
+            app.stop()
+
+
+def test_no_earlier_result_is_shown_as_current_on_the_page(
+    demo_case: dict[str, Path], tmp_path: Path, artifacts_dir: Path
+) -> None:
+    """Issue 46 item 2 with the mouse: after Reconstruct, a mark clicked on B marks the
+    results out of date (the page says so in the panel, over both images and beside the
+    model) and Undo unmarks them; Clear marks leaves no model, trace, MLD, table or
+    calibration; a failed Reconstruct after a good one leaves none either."""
+    from dataclasses import replace
+
+    from recon.io import load_seeds
+    from recon.seeds import Seeds
+    from viewer_app.results import NO_RECONSTRUCTION_TEXT
+
+    sync_api = pytest.importorskip("playwright.sync_api", reason="playwright is not installed")
+    app = ViewerApp(str(demo_case["a"]), str(demo_case["b"]), str(demo_case["seeds"]),
+                    port=0, autosave_path=tmp_path / "autosave.json")
+    app.wait_ready()
+    model_nodes = "() => Object.keys(window.__viserMutable.nodeRefFromName)" \
+        ".filter((n) => n.startsWith('/model') || n.endsWith('/out_of_date'))"
+    with sync_api.sync_playwright() as pw:
+        b = Browser(pw, tmp_path / "profile", artifacts_dir)
+        try:
+            b.open(app)
+            assert _reconstructed(b, app, len(app.notifications))
+            b.page.wait_for_timeout(1000)
+            b.choose("Mode", "Waypoint")
+            wait_for(lambda: app.state.mode == "waypoint", 10, "the mode")
+            mark, _ = b.click("b", 300.0, 200.0)
+            assert mark is not None
+            for name in ("/over_a/out_of_date", "/over_b/out_of_date", "/model/out_of_date"):
+                b.page.wait_for_function(
+                    f"() => '{name}' in window.__viserMutable.nodeRefFromName", timeout=10_000)
+            b.page.get_by_text("these results are of earlier marks").first.wait_for(
+                state="visible", timeout=10_000)
+            b.shot("answers_4_results_out_of_date.png")
+            _press(b, "Undo")
+            wait_for(lambda: not app.panels.results.stale.visible, 10, "the undo")
+            b.page.get_by_text("these results are of earlier marks").first.wait_for(
+                state="hidden", timeout=10_000)
+            assert app.server.scene.get_handle_by_name("/over_a/out_of_date") is None
+
+            _press(b, "Clear marks")
+            wait_for(lambda: app.reconstruction is None and app.state.marks == [], 10,
+                     "Clear marks")
+            b.reload()  # a page's lookup table keeps removed names: ask a fresh page
+            assert b.page.evaluate(model_nodes) == []
+            b.page.get_by_text(NO_RECONSTRUCTION_TEXT).first.wait_for(state="visible",
+                                                                     timeout=10_000)
+            b.page.get_by_text("Not calibrated").first.wait_for(state="visible",
+                                                                timeout=10_000)
+            b.shot("answers_5_cleared.png")
+
+            # A good run, then one the tracing refuses: nothing of the first stays.
+            seeds = load_seeds(demo_case["seeds"])
+            app.load_seeds(str(demo_case["seeds"]))
+            assert _reconstructed(b, app, len(app.notifications))
+            seg = seeds.segments[0]
+            a = seg.a_px
+            bad = tmp_path / "out_of_order.json"
+            bad.write_text(json.dumps(Seeds(segments=(replace(seg, a_px=(a[0], a[-1], a[1],
+                                                                         a[2])),),
+                                            features=seeds.features).to_dict()))
+            app.access.add_read_root(tmp_path)
+            assert app.load_seeds(str(bad))
+            assert not _reconstructed(b, app, len(app.notifications))
+            b.page.get_by_text("Reconstruct failed").first.wait_for(state="visible",
+                                                                    timeout=10_000)
+            assert app.reconstruction is None and app.model is None
+            b.page.wait_for_timeout(1000)
+            b.shot("answers_6_failed_run.png")
+            b.reload()
+            assert b.page.evaluate(model_nodes) == []
+            assert not failed(app) or app.notifications[-1][1] == "Reconstruct failed"
         finally:
             b.close()
             app.stop()

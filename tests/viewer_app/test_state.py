@@ -532,3 +532,19 @@ def test_a_mark_moved_and_deleted_with_undo() -> None:
         st.delete_mark()
     with pytest.raises(ValueError, match="no mark with id 999"):
         st.move_mark(999, 1.0, 1.0)
+
+
+def test_a_click_s_message_goes_with_the_marks_it_was_about() -> None:
+    """The "not snapped" line of a click stayed in the marks panel after Clear marks,
+    an Undo or loaded seeds (issue 46 item 2)."""
+    def snapper(view: str, raw: np.ndarray) -> tuple[np.ndarray, None, str]:
+        return raw, None, "not snapped, kept where clicked"
+
+    st = MarkState(VIEW_A, VIEW_B, snapper=snapper)
+    for change in (st.clear, st.undo, lambda: st.load_seeds(Seeds(segments=(), features=())),
+                   st.delete_mark):
+        mark = st.click("a", 10.0, 20.0)
+        assert st.last_message == "not snapped, kept where clicked"
+        st.select(mark.id)
+        change()
+        assert st.last_message is None
