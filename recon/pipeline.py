@@ -62,14 +62,7 @@ from recon.pose import (
     refine_with_matches,
 )
 from recon.seeds import Seeds
-from recon.trace import (
-    IntensityMapping,
-    VesselnessMap,
-    compute_vesselness,
-    is_display_processed,
-    resolve_mapping,
-    trace_segment,
-)
+from recon.trace import VesselnessMap, compute_vesselness, trace_pair
 from recon.types import Angiogram, Centerline2D, Centerline3D, Matching, arclength
 
 __all__ = [
@@ -341,7 +334,7 @@ def calibrate_from_seeds(
     cl_a = cl_b = None
     if vesselness is not None:
         seg = _segment(seeds, segment)
-        cl_a, cl_b = _trace_pair(
+        cl_a, cl_b = trace_pair(
             (angio_a, angio_b), (seg.a, seg.b), vesselness,
             (angio_a.geometry.pixel_mm_at_isocenter, angio_b.geometry.pixel_mm_at_isocenter),
             intensity)
@@ -405,7 +398,7 @@ def reconstruct_pair(
             compute_vesselness(angio_b.image, pixel_mm=pixel_mm_b),
         )
     if traced is None:
-        traced = _trace_pair((angio_a, angio_b), (seg.a, seg.b), vesselness,
+        traced = trace_pair((angio_a, angio_b), (seg.a, seg.b), vesselness,
                              (pixel_mm_a, pixel_mm_b), (options.intensity_a, options.intensity_b))
     cl_a, cl_b = traced
     lap("trace")
@@ -513,47 +506,6 @@ def reconstruct_pair(
         optimal_view=next_view,
         intervals=intervals,
         ffr=ffr,
-    )
-
-
-def _trace_pair(
-    angios: tuple[Angiogram, Angiogram],
-    clicks_px: tuple[np.ndarray, np.ndarray],
-    vmaps: tuple[VesselnessMap, VesselnessMap],
-    pixel_mm: tuple[float, float],
-    intensity: tuple[str, str],
-) -> tuple[Centerline2D, Centerline2D]:
-    """Both views' traces (A, B), each by :func:`_trace`."""
-    return (_trace(angios[0], clicks_px[0], vmaps[0], "A", pixel_mm[0], intensity[0]),
-            _trace(angios[1], clicks_px[1], vmaps[1], "B", pixel_mm[1], intensity[1]))
-
-
-def _trace(
-    angio: Angiogram,
-    clicks_px: np.ndarray,
-    vmap: VesselnessMap,
-    view: str,
-    pixel_mm: float,
-    intensity: str | IntensityMapping,
-) -> Centerline2D:
-    """One view's trace, with the intensity mapping resolved once for its image (or given).
-
-    A display-processed file (tag DISP, DRM, ...) with the mapping left to "auto" is
-    neither "lin" nor "log": its radius is fitted under the Box-Cox power that the
-    trace's own profiles fit best (:func:`recon.trace.centerline.trace_segment` given "auto").
-    """
-    relationship = angio.info.get("pixel_intensity_relationship")
-    fit_power = intensity == "auto" and is_display_processed(relationship)
-    mapping = intensity if isinstance(intensity, IntensityMapping) or fit_power else \
-        resolve_mapping(angio.image, relationship, intensity, vesselness=vmap)
-    return trace_segment(
-        angio.image,
-        clicks_px,
-        vesselness=vmap,
-        view=view,
-        pixel_mm=pixel_mm,
-        relationship=relationship,
-        intensity=mapping,
     )
 
 

@@ -49,7 +49,6 @@ from recon.pipeline import (
     ReconstructionOptions,
     _check_separation,
     _notify,
-    _trace_pair,
     calibrate_view_b,
     check_calibration,
     ffr_model,
@@ -57,7 +56,7 @@ from recon.pipeline import (
 )
 from recon.pose import CalibrationResult, measurement_intervals, optimal_view, refine_with_matches
 from recon.seeds import Seeds, Segment
-from recon.trace import TraceError, VesselnessMap, compute_vesselness
+from recon.trace import TraceError, VesselnessMap, compute_vesselness, trace_pair
 from recon.types import Angiogram, Centerline2D, arclength
 
 __all__ = [
@@ -480,7 +479,7 @@ def _trace_both(angio_a: Angiogram, angio_b: Angiogram, seg: Segment,
     """One segment's traces in A and B; in a tree, a failure names the segment."""
     view_a, view_b = angio_a.geometry, angio_b.geometry
     try:
-        return _trace_pair((angio_a, angio_b), (seg.a, seg.b), vesselness,
+        return trace_pair((angio_a, angio_b), (seg.a, seg.b), vesselness,
                            (view_a.pixel_mm_at_isocenter, view_b.pixel_mm_at_isocenter),
                            (options.intensity_a, options.intensity_b))
     except CoronaryError as err:

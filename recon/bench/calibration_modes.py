@@ -67,9 +67,10 @@ def _case(which):
 def evaluate_case(which) -> dict:
     """One case: the 3D error per mode, or its failure (runs in a worker)."""
     from recon.bench.reconstruct import case_angiograms
-    from recon.pipeline import _features, _trace_pair
+    from recon.pipeline import _features
     from recon.pose.calibration import calibrate_supported
     from recon.pose.calibration_curves import calibrate_with_curves
+    from recon.trace import trace_pair
     from recon.trace.centerline import compute_vesselness
 
     case, key = _case(which)
@@ -80,7 +81,7 @@ def evaluate_case(which) -> dict:
         px_mm = (va.pixel_mm_at_isocenter, vb.pixel_mm_at_isocenter)
         vmaps = (compute_vesselness(a.image, pixel_mm=px_mm[0]),
                  compute_vesselness(b.image, pixel_mm=px_mm[1]))
-        cl_a, cl_b = _trace_pair((a, b), (seg.a, seg.b), vmaps, px_mm, ("auto", "auto"))
+        cl_a, cl_b = trace_pair((a, b), (seg.a, seg.b), vmaps, px_mm, ("auto", "auto"))
         pa, pb = _features(case.seeds, 0, cl_a, cl_b)
         t0 = time.perf_counter()
         full = calibrate_supported(va, vb, pa, pb, candidates=("full",))

@@ -227,12 +227,12 @@ def _evaluate_varied_view(image: np.ndarray, view: ViewGeometry, clicks_px: np.n
     truth; raises what the tracing raises. The view is traced as the pipeline traces
     each view (``recon.pipeline._trace``: the intensity mapping resolved once on the
     whole image, or a display-processed file's Box-Cox power fitted on the trace)."""
-    from recon.pipeline import _trace
+    from recon.trace import trace_view
 
     pixel_mm = view.pixel_mm_at_isocenter
     angio = case_angiogram(image, view, name, case.chain)
     t1 = time.perf_counter()
-    cl = _trace(angio, np.asarray(clicks_px, dtype=float), vmap, name, pixel_mm, "auto")
+    cl = trace_view(angio, np.asarray(clicks_px, dtype=float), vmap, name, pixel_mm, "auto")
     t2 = time.perf_counter()
     main_X, main_r = case.truth.vessels[0]
     dense, radius_true = _dense_truth(view, main_X, main_r)

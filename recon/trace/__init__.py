@@ -17,6 +17,8 @@ _EXPORTS = {
     "is_display_processed": "recon.trace.intensity",
     "resolve_mapping": "recon.trace.intensity",
     "TraceError": "recon.trace.trace_error",
+    "trace_pair": "recon.trace.pair",
+    "trace_view": "recon.trace.pair",
 }
 
 __all__ = list(_EXPORTS)

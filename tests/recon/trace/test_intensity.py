@@ -199,8 +199,8 @@ def test_the_pipeline_fits_a_display_processed_files_power() -> None:
     reads within 4 % of the tube's (the power, 0.9 for the true 0.71, trades against the
     fitted blur: +3 % here); the same image read as "lin" (the noise-trend choice for
     such a file) reads more than 5 % narrower."""
-    from recon.pipeline import _trace
     from recon.synth.presets import preset_view
+    from recon.trace import trace_view
     from recon.types import Angiogram
 
     line, shape = straight()
@@ -215,9 +215,9 @@ def test_the_pipeline_fits_a_display_processed_files_power() -> None:
     def radius(cl) -> float:
         return float(np.median(cl.radius_px[10:-10]))
 
-    fitted = _trace(angio, clicks, None, "A", 0.3, "auto")
+    fitted = trace_view(angio, clicks, None, "A", 0.3, "auto")
     assert "Box-Cox power" in fitted.intensity_reason, fitted.intensity_reason
     assert 0.0 < fitted.intensity_power
     assert radius(fitted) == pytest.approx(4.0, rel=0.04)
-    as_lin = _trace(angio, clicks, None, "A", 0.3, "lin")
+    as_lin = trace_view(angio, clicks, None, "A", 0.3, "lin")
     assert radius(as_lin) < 0.95 * 4.0
