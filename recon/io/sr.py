@@ -5,8 +5,17 @@ instance. DICOM's own QCA template (TID 3213, Quantitative Arterial
 Analysis) describes measurements made in one projection image; ours are
 made along a 3D centerline triangulated from two projections, so the
 generic measurement report is the honest container: one measurement group
-(TID 1501) for the reconstructed segment, whose source images are both
-angiograms (by SOP Instance UID, and frame number for a cine).
+(TID 1501) per reconstructed segment (every branch of a tree, in the seeds'
+order; tracking identifier the segment's name), then one per lesion of that
+segment (report.json's ``lesions``; tracking identifier "<segment> lesion <k>"),
+whose source images are both angiograms (by SOP Instance UID, and frame number
+for a cine).
+
+Finding Site: the segment's name read as a coronary artery or segment of DICOM
+PS3.16 CID 3015 "Coronary Artery" (SNOMED CT codes as pydicom's
+``pydicom.sr.codedict`` holds them): LM, LAD, LCx, RCA with a proximal / mid /
+distal qualifier, D1-D3, OM1-OM3, ramus, PDA, ... (:func:`finding_site_code`);
+a name it does not know is "Coronary artery" (SCT 41801008).
 
 Concepts (SNOMED CT "SCT", DICOM "DCM"; units UCUM):
 
@@ -32,8 +41,10 @@ The FFR is the distal value of :mod:`recon.lumen.ffr`'s model, for research, not
 measured with a pressure wire: its method says that it was computed.
 
 When the report carries 95 % intervals (``report["measurements_ci95"]``,
-a ``{key: [low, high]}`` per measurement key), each measurement gets them
-as its upper and lower measurement uncertainty (TID 310); otherwise none.
+a ``{key: [low, high]}`` per measurement key; a lesion's ``ci95``), each
+measurement gets them as its upper and lower measurement uncertainty (TID 310:
+SCT 371886008 / 371885007, in the units of the measurement they qualify, mm or %;
+highdicom's own items carry the unit "1", so they are made here); otherwise none.
 
 The patient and study modules are copied from view A's file (highdicom
 copies them from the first evidence dataset); both files must name the
@@ -63,9 +74,12 @@ from recon.io.image_files import is_image_file
 __all__ = [
     "SR_FILE_NAME",
     "SR_MEASUREMENTS",
+    "SR_LESION_MEASUREMENTS",
     "SRSources",
     "read_sr_sources",
     "measurement_report_sr",
+    "finding_site_code",
+    "write_sr",
 ]
 
 SR_FILE_NAME = "measurements-sr.dcm"
@@ -95,6 +109,18 @@ SR_MEASUREMENTS = {
     "ffr": (codes.SCT.FractionalFlowReserve, codes.UCUM.Ratio, None,
             codes.SCT.ComputedHemodynamicMeasurementMethod),
 }
+
+# a lesion's key in report.json's ``lesions`` -> (concept, unit, derivation, method)
+SR_LESION_MEASUREMENTS = {
+    "mld_mm": SR_MEASUREMENTS["mld_mm"],
+    "reference_diameter_mm": SR_MEASUREMENTS["reference_diameter_mm"],
+    "diameter_stenosis_pct": SR_MEASUREMENTS["diameter_stenosis_pct"],
+    "area_stenosis_pct": SR_MEASUREMENTS["area_stenosis_pct"],
+    "mla_mm2": SR_MEASUREMENTS["mla_mm2"],
+    "length_mm": SR_MEASUREMENTS["lesion_length_mm"],
+}
+_UPPER = hd.sr.CodedConcept("371886008", "SCT", "+, range of upper measurement uncertainty")
+_LOWER = hd.sr.CodedConcept("371885007", "SCT", "-, range of lower measurement uncertainty")
 
 # Type 2 attributes highdicom reads from the first evidence dataset; a file that
 # lacks one gets it empty (DICOM's "unknown"), never a made-up value.
@@ -169,53 +195,30 @@ def read_sr_sources(
 
 
 def measurement_report_sr(report: dict, sources: SRSources) -> bytes:
-    """The SR file's bytes for one reconstruction's report (report.json's dict)."""
+    """The SR file's bytes for one reconstruction's report (report.json's dict): a group
+    per segment (``report["branches"]`` for a tree, else the report itself) and one per
+    lesion of each."""
     evidence = [_evidence(sources.header_a), _evidence(sources.header_b)]
-    images = []
-    for ds, frame in zip(evidence, sources.frame_numbers, strict=True):
-        cine = frame is not None and int(ds.get("NumberOfFrames", 1) or 1) > 1
-        frames = [int(frame)] if cine else None
-        images.append(
-            hd.sr.SourceImageForMeasurementGroup(
-                referenced_sop_class_uid=ds.SOPClassUID,
-                referenced_sop_instance_uid=ds.SOPInstanceUID,
-                referenced_frame_numbers=frames,
-            )
-        )
     algorithm = hd.sr.AlgorithmIdentification(name="coronary3d", version=__version__)
-    values = report["measurements"]
-    intervals = report.get("measurements_ci95") or {}
-    measurements = []
-    for key, (concept, unit, derivation, method) in SR_MEASUREMENTS.items():
-        if values.get(key) is None:  # a report without the FFR
-            continue
-        value = float(values[key])
-        properties = None
-        if key in intervals:
-            low, high = (float(v) for v in intervals[key])
-            properties = hd.sr.MeasurementProperties(
-                upper_measurement_uncertainty=max(0.0, high - value),
-                lower_measurement_uncertainty=max(0.0, value - low),
-            )
-        measurements.append(
-            hd.sr.Measurement(
-                name=concept,
-                value=value,
-                unit=unit,
-                derivation=derivation,
-                method=method,
-                properties=properties,
-            )
-        )
-    segment = str(report.get("inputs", {}).get("segment") or "segment")
-    group = hd.sr.MeasurementsAndQualitativeEvaluations(
-        tracking_identifier=hd.sr.TrackingIdentifier(uid=generate_uid(), identifier=segment),
-        finding_type=codes.SCT.Stenosis,
-        finding_sites=[hd.sr.FindingSite(anatomic_location=codes.SCT.CoronaryArtery)],
-        algorithm_id=algorithm,
-        measurements=measurements,
-        source_images=images,
-    )
+    groups = []
+    for entry in report.get("branches") or [report]:
+        name = str(entry.get("inputs", {}).get("segment") or "segment")
+        site = [hd.sr.FindingSite(anatomic_location=finding_site_code(name))]
+        values, intervals = entry["measurements"], entry.get("measurements_ci95") or {}
+        groups.append(hd.sr.MeasurementsAndQualitativeEvaluations(
+            tracking_identifier=hd.sr.TrackingIdentifier(uid=generate_uid(), identifier=name),
+            finding_type=codes.SCT.Stenosis, finding_sites=site, algorithm_id=algorithm,
+            measurements=_measurements(SR_MEASUREMENTS, values, intervals),
+            source_images=_source_images(evidence, sources.frame_numbers)))
+        for lesion in entry.get("lesions") or []:
+            ident = f"{name} lesion {lesion['number']}"
+            groups.append(hd.sr.MeasurementsAndQualitativeEvaluations(
+                tracking_identifier=hd.sr.TrackingIdentifier(uid=generate_uid(),
+                                                              identifier=ident),
+                finding_type=codes.SCT.Stenosis, finding_sites=site, algorithm_id=algorithm,
+                measurements=_measurements(SR_LESION_MEASUREMENTS, lesion,
+                                           lesion.get("ci95") or {}),
+                source_images=_source_images(evidence, sources.frame_numbers)))
     observer = hd.sr.ObserverContext(
         observer_type=codes.DCM.Device,
         observer_identifying_attributes=hd.sr.DeviceObserverIdentifyingAttributes(
@@ -225,7 +228,7 @@ def measurement_report_sr(report: dict, sources: SRSources) -> bytes:
     content = hd.sr.MeasurementReport(
         observation_context=hd.sr.ObservationContext(observer_device_context=observer),
         procedure_reported=codes.SCT.CoronaryArteriography,
-        imaging_measurements=[group],
+        imaging_measurements=groups,
     )
     with warnings.catch_warnings():
         # highdicom warns about the form of a person name, quoting it: patient data
@@ -245,6 +248,124 @@ def measurement_report_sr(report: dict, sources: SRSources) -> bytes:
     buffer = io.BytesIO()
     sr.save_as(buffer, enforce_file_format=True)
     return buffer.getvalue()
+
+
+def _source_images(evidence: list[Dataset], frame_numbers: tuple[int | None, int | None]
+                   ) -> list[hd.sr.SourceImageForMeasurementGroup]:
+    """Both angiograms as a group's source images (the frame used, for a cine)."""
+    images = []
+    for ds, frame in zip(evidence, frame_numbers, strict=True):
+        cine = frame is not None and int(ds.get("NumberOfFrames", 1) or 1) > 1
+        images.append(hd.sr.SourceImageForMeasurementGroup(
+            referenced_sop_class_uid=ds.SOPClassUID,
+            referenced_sop_instance_uid=ds.SOPInstanceUID,
+            referenced_frame_numbers=[int(frame)] if cine else None))
+    return images
+
+
+def _measurements(concepts: dict, values: dict, intervals: dict) -> list[hd.sr.Measurement]:
+    """The measurements of ``concepts`` (key -> concept, unit, derivation, method) that
+    ``values`` holds, each with its 95 % interval from ``intervals`` (key -> [lo, hi]) as
+    upper and lower measurement uncertainty in the measurement's own unit."""
+    out = []
+    for key, (concept, unit, derivation, method) in concepts.items():
+        if values.get(key) is None:  # a report without the FFR
+            continue
+        value = float(values[key])
+        properties = None
+        if intervals.get(key) is not None:
+            low, high = (float(v) for v in intervals[key])
+            properties = hd.sr.MeasurementProperties()
+            for name, spread in ((_UPPER, max(0.0, high - value)),
+                                 (_LOWER, max(0.0, value - low))):
+                properties.append(hd.sr.NumContentItem(
+                    name=name, value=spread, unit=unit,
+                    relationship_type=hd.sr.RelationshipTypeValues.HAS_PROPERTIES))
+        out.append(hd.sr.Measurement(name=concept, value=value, unit=unit,
+                                     derivation=derivation, method=method,
+                                     properties=properties))
+    return out
+
+
+#: Segment-name words -> the CID 3015 concept (pydicom's codes.SCT name); checked in order,
+#: the first whose words all occur in the name wins.
+_SITES: tuple[tuple[tuple[str, ...], str], ...] = (
+    (("lm",), "LeftMainCoronaryArtery"), (("lmca",), "LeftMainCoronaryArtery"),
+    (("left", "main"), "LeftMainCoronaryArtery"),
+    (("plad",), "ProximalLeftAnteriorDescendingCoronaryArtery"),
+    (("proximal", "lad"), "ProximalLeftAnteriorDescendingCoronaryArtery"),
+    (("mlad",), "MidLeftAnteriorDescendingCoronaryArtery"),
+    (("mid", "lad"), "MidLeftAnteriorDescendingCoronaryArtery"),
+    (("dlad",), "DistalLeftAnteriorDescendingCoronaryArtery"),
+    (("distal", "lad"), "DistalLeftAnteriorDescendingCoronaryArtery"),
+    (("lad",), "LeftAnteriorDescendingCoronaryArtery"),
+    (("anterior", "descending"), "LeftAnteriorDescendingCoronaryArtery"),
+    (("proximal", "lcx"), "ProximalCircumflexCoronaryArtery"),
+    (("proximal", "cx"), "ProximalCircumflexCoronaryArtery"),
+    (("mid", "lcx"), "MidCircumflexCoronaryArtery"), (("mid", "cx"), "MidCircumflexCoronaryArtery"),
+    (("distal", "lcx"), "DistalCircumflexCoronaryArtery"),
+    (("distal", "cx"), "DistalCircumflexCoronaryArtery"),
+    (("lcx",), "CircumflexCoronaryArtery"), (("cx",), "CircumflexCoronaryArtery"),
+    (("circumflex",), "CircumflexCoronaryArtery"),
+    (("prca",), "ProximalRightCoronaryArtery"),
+    (("proximal", "rca"), "ProximalRightCoronaryArtery"),
+    (("mrca",), "MidRightCoronaryArtery"), (("mid", "rca"), "MidRightCoronaryArtery"),
+    (("drca",), "DistalRightCoronaryArtery"), (("distal", "rca"), "DistalRightCoronaryArtery"),
+    (("rca",), "RightCoronaryArtery"), (("right", "coronary"), "RightCoronaryArtery"),
+    (("d1",), "_1stDiagonalCoronaryArtery"), (("diagonal", "1"), "_1stDiagonalCoronaryArtery"),
+    (("first", "diagonal"), "_1stDiagonalCoronaryArtery"),
+    (("d2",), "_2ndDiagonalCoronaryArtery"), (("diagonal", "2"), "_2ndDiagonalCoronaryArtery"),
+    (("second", "diagonal"), "_2ndDiagonalCoronaryArtery"),
+    (("d3",), "_3rdDiagonalCoronaryArtery"), (("diagonal", "3"), "_3rdDiagonalCoronaryArtery"),
+    (("third", "diagonal"), "_3rdDiagonalCoronaryArtery"),
+    (("om1",), "_1stMarginalCoronaryArtery"), (("om", "1"), "_1stMarginalCoronaryArtery"),
+    (("om2",), "_2ndMarginalCoronaryArtery"), (("om", "2"), "_2ndMarginalCoronaryArtery"),
+    (("om3",), "_3rdMarginalCoronaryArtery"), (("om", "3"), "_3rdMarginalCoronaryArtery"),
+    (("ramus",), "IntermediateArteryRamus"), (("intermediate",), "IntermediateArteryRamus"),
+    (("pda",), "PosteriorDescendingRightCoronaryArtery"),
+    (("posterior", "descending"), "PosteriorDescendingRightCoronaryArtery"),
+    (("s1",), "_1stSeptalCoronaryArtery"), (("first", "septal"), "_1stSeptalCoronaryArtery"),
+)
+
+
+def finding_site_code(segment_name: str) -> hd.sr.Code:
+    """The Finding Site concept of a segment named ``segment_name`` (module docstring):
+    its words (letters and digits, case ignored) matched against :data:`_SITES`."""
+    import re
+
+    words = set(re.findall(r"[a-z]+|\d+", str(segment_name).lower()))
+    joined = set(re.findall(r"[a-z]+\d*", str(segment_name).lower()))  # "om1", "d2"
+    for needed, concept in _SITES:
+        if all(w in words or w in joined for w in needed):
+            return getattr(codes.SCT, concept)
+    return codes.SCT.CoronaryArtery
+
+
+def write_sr(result, path: str | os.PathLike, sources: SRSources | tuple) -> Path:
+    """Write the SR of a reconstruction (a :class:`recon.pipeline.Reconstruction` or
+    :class:`recon.tree.TreeReconstruction`) to ``path`` (whole or not at all) and return
+    the path. ``sources``: an :class:`SRSources`, or the two inputs as (path_a, path_b)
+    or (path_a, path_b, (frame_a, frame_b)) with 1-based frames, checked as
+    :func:`read_sr_sources` checks them. Its values are report.json's to the digit (the
+    report goes through JSON, as in the output set)."""
+    import json
+
+    import numpy as np
+
+    from recon.io.files import atomic_write_bytes
+
+    def plain(value: object) -> object:
+        if isinstance(value, np.generic):
+            return value.item()
+        if isinstance(value, np.ndarray | tuple):
+            return list(value)
+        return str(value)
+
+    if not isinstance(sources, SRSources):
+        sources = read_sr_sources(*sources)
+    report = json.loads(json.dumps(result.report(), default=plain))
+    atomic_write_bytes(path, measurement_report_sr(report, sources))
+    return Path(path)
 
 
 def _evidence(header: Dataset) -> Dataset:

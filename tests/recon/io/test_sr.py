@@ -42,8 +42,9 @@ def demo_sr(tmp_path_factory) -> Path:
 
 
 def _measurements(sr: hd.sr.Comprehensive3DSR) -> list:
+    """The first segment's measurements (the demo: one segment, then its one lesion)."""
     groups = sr.content.get_image_measurement_groups()
-    assert len(groups) == 1
+    assert [g.tracking_identifier for g in groups] == ["main", "main lesion 1"]
     return groups[0].get_measurements()
 
 
@@ -108,6 +109,8 @@ def test_intervals_are_written_when_the_report_has_them(demo_sr):
     report = json.loads((demo_sr / "report.json").read_text())
     mld = report["measurements"]["mld_mm"]
     report["measurements_ci95"] = {"mld_mm": [mld - 0.1, mld + 0.25]}
+    report.pop("branches")  # the top level as the one segment, without its lesion groups
+    report["lesions"] = []
     sources = read_sr_sources(DEMO / "a.dcm", DEMO / "b.dcm")
     ds = pydicom.dcmread(pydicom.filebase.DicomBytesIO(measurement_report_sr(report, sources)))
     found = _uncertainties(ds)
@@ -128,7 +131,10 @@ def test_a_cine_frame_is_referenced_by_its_number(tmp_path):
     images = sr.content.get_image_measurement_groups()[0].source_images
     chosen = [load_angiogram(DATA / name).frame_index + 1 for name in ("IM7.dcm", "IM8.dcm")]
     assert [list(img.referenced_frame_numbers) for img in images] == [[f] for f in chosen]
-    assert _measurements(sr)[0].value == pytest.approx(report["measurements"]["mld_mm"])
+    groups = sr.content.get_image_measurement_groups()
+    assert [g.tracking_identifier for g in groups] == ["diagonal branch"]  # no lesion
+    assert groups[0].get_measurements()[0].value == pytest.approx(
+        report["measurements"]["mld_mm"])
 
 
 def test_image_inputs_are_refused_before_any_work(tmp_path):
@@ -182,3 +188,123 @@ def _uncertainties(ds: pydicom.Dataset) -> dict[str, float]:
 
     walk(ds.ContentSequence)
     return found
+
+
+# ------------------------------------------------------------ the whole tree (issue 46)
+@pytest.fixture(scope="module")
+def tree_sr(tmp_path_factory) -> Path:
+    """The demo tree with its side branch clicked, the segments named LAD and D1."""
+    from recon.io.seeds_file import save_seeds
+    from recon.seeds import Seeds
+    from recon.synth import make_phantom
+    from recon.synth.tree_case import tree_seeds
+
+    seeds, _, _ = tree_seeds(np.random.default_rng(1), make_phantom("static", 7, render=False))
+    main, side = seeds.segments
+    from dataclasses import replace
+
+    named = Seeds(segments=(replace(main, name="LAD"),
+                            replace(side, name="D1", parent="LAD")),
+                  features=seeds.features)
+    root = tmp_path_factory.mktemp("tree_sr")
+    save_seeds(named, root / "seeds.json")
+    proc = run_cli("reconstruct", "--demo", "--seeds", str(root / "seeds.json"), "--sr",
+                   "--quiet", "--out", str(root / "out"))
+    assert proc.returncode == 0, proc.stderr
+    return root / "out"
+
+
+def test_the_sr_carries_every_segment_and_every_lesion_with_coded_sites(tree_sr):
+    report = json.loads((tree_sr / "report.json").read_text())
+    sr = hd.sr.srread(tree_sr / SR_FILE_NAME)
+    groups = sr.content.get_image_measurement_groups()
+    expected = []
+    for branch in report["branches"]:
+        name = branch["inputs"]["segment"]
+        expected += [name] + [f"{name} lesion {les['number']}" for les in branch["lesions"]]
+    assert [g.tracking_identifier for g in groups] == expected == ["LAD", "LAD lesion 1", "D1"]
+    sites = {g.tracking_identifier: g.finding_sites[0].value.value for g in groups}
+    # SCT 59438005 anterior descending branch of the left coronary artery, 91750005 the
+    # first diagonal branch (DICOM CID 3015)
+    assert sites == {"LAD": "59438005", "LAD lesion 1": "59438005", "D1": "91750005"}
+    by_name = {g.tracking_identifier: g for g in groups}
+    for branch in report["branches"]:  # every segment's figures, report.json's to the digit
+        name = branch["inputs"]["segment"]
+        values = {(m.name.value, m.derivation.value if m.derivation else None): m.value
+                  for m in by_name[name].get_measurements()}
+        assert values[("397413000", "255605001")] == pytest.approx(
+            branch["measurements"]["mld_mm"], rel=1e-9)
+        assert values[("122510", None)] == pytest.approx(
+            branch["measurements"]["segment_length_mm"], rel=1e-9)
+    lesion = report["branches"][0]["lesions"][0]
+    ds_item = [m for m in by_name["LAD lesion 1"].get_measurements()
+               if m.name.value == "408715008"][0]
+    assert ds_item.value == pytest.approx(lesion["diameter_stenosis_pct"], rel=1e-9)
+
+
+def test_uncertainties_carry_the_unit_of_their_measurement(tree_sr):
+    """TID 310: the +/- range of a measurement's uncertainty is in that measurement's units
+    (highdicom's own items said "1")."""
+    ds = pydicom.dcmread(tree_sr / SR_FILE_NAME)
+    pairs = []
+
+    def walk(items) -> None:
+        for item in items:
+            if item.get("ValueType") == "NUM":
+                unit = item.MeasuredValueSequence[0].MeasurementUnitsCodeSequence[0].CodeValue
+                for sub in item.get("ContentSequence", []):
+                    code = sub.ConceptNameCodeSequence[0].CodeValue
+                    if code in (UPPER_UNCERTAINTY, LOWER_UNCERTAINTY):
+                        pairs.append((unit, sub.MeasuredValueSequence[0]
+                                      .MeasurementUnitsCodeSequence[0].CodeValue))
+            walk(item.get("ContentSequence", []))
+
+    walk(ds.ContentSequence)
+    assert len(pairs) > 20
+    assert all(own == theirs for own, theirs in pairs), pairs
+    assert {own for own, _ in pairs} >= {"mm", "%", "mm2"}
+    assert "1" not in {theirs for _, theirs in pairs}
+
+
+@pytest.mark.skipif(shutil.which("dsrdump") is None, reason="dcmtk's dsrdump is not installed")
+def test_dsrdump_reads_every_segment_of_the_tree(tree_sr):
+    proc = subprocess.run(["dsrdump", "-Ee", str(tree_sr / SR_FILE_NAME)], capture_output=True,
+                          text=True, timeout=60)
+    assert proc.returncode == 0, proc.stderr
+    assert "E:" not in proc.stderr and "W:" not in proc.stderr, proc.stderr
+    for text in ('"LAD"', '"LAD lesion 1"', '"D1"', "Anterior Descending",
+                 "1st Diagonal Coronary Artery", '(mm,UCUM,"mm")', '(%,UCUM,"Percent")'):
+        assert text in proc.stdout, text
+    assert '(1,UCUM,"no units")' not in proc.stdout
+
+
+@pytest.mark.parametrize("name, code", [
+    ("LAD", "59438005"), ("pLAD", "68787002"), ("mid LAD", "91748002"), ("LCx", "57396003"),
+    ("RCA", "13647002"), ("distal RCA", "41879009"), ("LM", "3227004"), ("D2", "91751009"),
+    ("OM1", "91754001"), ("ramus", "244252004"), ("branch 1", "41801008"),
+    ("diagonal branch", "41801008")])
+def test_finding_site_codes_from_segment_names(name, code):
+    from recon.io.sr import finding_site_code
+
+    assert finding_site_code(name).value == code
+
+
+def test_write_sr_is_the_pages_call(tmp_path):
+    """write_sr(result, path, (path_a, path_b)): the file the page's download serves."""
+    from recon.io.seeds_file import load_seeds
+    from recon.io.sr import write_sr
+    from recon.pipeline import reconstruct_pair
+
+    a, b = load_angiogram(DEMO / "a.dcm"), load_angiogram(DEMO / "b.dcm")
+    rec = reconstruct_pair(a, b, load_seeds(DEMO / "seeds.json"))
+    path = write_sr(rec, tmp_path / "x.dcm", (DEMO / "a.dcm", DEMO / "b.dcm"))
+    groups = hd.sr.srread(path).content.get_image_measurement_groups()
+    assert [g.tracking_identifier for g in groups] == ["main", "main lesion 1"]
+    mld = [m for m in groups[0].get_measurements() if m.name.value == "397413000"][0]
+    assert mld.value == pytest.approx(rec.measurements.mld_mm, rel=1e-9)
+    other = pydicom.dcmread(DEMO / "b.dcm")
+    other.PatientID = "SOMEONE ELSE"
+    other.save_as(tmp_path / "b.dcm")
+    with pytest.raises(OutputError, match="different patients"):
+        write_sr(rec, tmp_path / "y.dcm", (DEMO / "a.dcm", tmp_path / "b.dcm"))
+    assert not (tmp_path / "y.dcm").exists()
