@@ -36,6 +36,7 @@ from viewer_app.camera import PageCameras
 from viewer_app.catheter import CatheterTool
 from viewer_app.exports import EXPORT_KINDS
 from viewer_app.panels import Panels, build_panels
+from viewer_app.patients import PatientPrompt
 from viewer_app.results import close_views_warning
 from viewer_app.runs import RunCommands
 from viewer_app.scene import LAYOUTS, ModelNodes, View
@@ -125,6 +126,9 @@ class ViewerApp(RunCommands):
         angio_b = load_angiogram(path_b, frame=frame_b, overrides=overrides_b)
         seeds = load_seeds(seeds_path) if seeds_path is not None else None
         self.pending_pair: tuple[str, str] | None = None  # a pair waiting for its geometry
+        # files of two patients (viewer_app.patients): computing waits for a confirmation
+        self.patients_differ = self.patients_confirmed = False
+        self.patient_prompt = PatientPrompt(lambda client: self.confirm_one_patient(client))
 
         self.access = FileAccess(
             [Path(p).parent for p in (path_a, path_b, seeds_path) if p is not None]
@@ -199,6 +203,8 @@ class ViewerApp(RunCommands):
             self.notify("Autosave kept aside", notice, "warning", client)
         if self.pair_warning is not None:
             self.notify("Views too similar", self.pair_warning, "warning", client)
+        if self.patients_differ and not self.patients_confirmed:
+            self.patient_prompt.show(client)
 
     def notify(
         self, title: str, body: str, level: str = "info", client: object | None = None
@@ -255,6 +261,9 @@ class ViewerApp(RunCommands):
             for v in self.views.values():
                 scene.add_view_nodes(self.server.scene, v, self._make_click_callback(v.key))
             self.panels.show_pair(self.views)
+            self.patients_differ = opening.patients_differ((angio_a.path, angio_b.path))
+            self.patients_confirmed = False
+            self._show_patients()
             self.pair_warning = close_views_warning(angio_a.geometry, angio_b.geometry)
             if self.pair_warning is not None:  # at once, before any computation
                 self.notify("Views too similar", self.pair_warning, "warning")
@@ -266,6 +275,30 @@ class ViewerApp(RunCommands):
         self.set_layout("Angiograms")
         for view in self.views.values():  # vesselness in the background, once per image
             threading.Thread(target=self._warm_vesselness, args=(view,), daemon=True).start()
+
+    def _show_patients(self) -> None:
+        """While the pair's files name two patients unconfirmed: the warning and its
+        button in the Marks folder and a dialog on every page; else none of them."""
+        waiting = self.patients_differ and not self.patients_confirmed
+        self.panels.show_patients(waiting)
+        if not waiting:
+            self.patient_prompt.close_all()
+            return
+        log.warning("the two files name different patients: computing waits for the user")
+        for client in list(self.server.get_clients().values()):
+            self.patient_prompt.show(client)
+
+    def confirm_one_patient(self, client: object | None = None) -> None:
+        """The clinician confirms that files A and B, which name different patients, are
+        one patient's views: Calibrate and Reconstruct may go on."""
+        with self._lock:
+            if not self.patients_differ or self.patients_confirmed:
+                return
+            self.patients_confirmed = True
+            self._show_patients()
+        log.info("two patients' files confirmed as one patient's views by the user")
+        self.notify("One patient", "confirmed: files A and B are taken as one patient's "
+                    "views", "info", client)
 
     @staticmethod
     def _warm_vesselness(view: View) -> None:

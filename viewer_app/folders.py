@@ -88,6 +88,8 @@ class MarksPanel:
     """Click mode, segments, the selected mark, undo / clear and the marks summary."""
 
     warning: viser.GuiMarkdownHandle  # about the pair (views too similar), hidden if none
+    patients: viser.GuiMarkdownHandle  # files of two patients, until confirmed; hidden
+    confirm_patients: viser.GuiButtonHandle  # "They are one patient's views"; hidden
     guide: viser.GuiMarkdownHandle  # what the next click in A and in B places
     mode: viser.GuiDropdownHandle
     segment: viser.GuiDropdownHandle
@@ -257,6 +259,14 @@ def marks_folder(gui: viser.GuiApi, app: PageCommands, refreshing: Refreshing) -
     # the value read may already be stale: only a user's change may act.
     with gui.add_folder("Marks"):
         warning = gui.add_markdown("", visible=False)
+        patients = gui.add_markdown("", visible=False)
+        confirm_patients = gui.add_button("They are one patient's views", color="red",
+                                          visible=False)
+
+        @confirm_patients.on_click
+        async def _(event: viser.GuiEvent) -> None:
+            app.confirm_one_patient(client=event.client)
+
         guide = gui.add_markdown("")
         mode = gui.add_dropdown("Mode", [MODE_LABELS[m] for m in MODES],
                                 initial_value=MODE_LABELS["guided"])
@@ -319,7 +329,8 @@ def marks_folder(gui: viser.GuiApi, app: PageCommands, refreshing: Refreshing) -
             app.clear()
 
         summary = gui.add_markdown("")
-    return MarksPanel(warning=warning, guide=guide, mode=mode, segment=segment, name=name,
+    return MarksPanel(warning=warning, patients=patients, confirm_patients=confirm_patients,
+                      guide=guide, mode=mode, segment=segment, name=name,
                       rename=rename, new_segment=new_segment, new_branch=new_branch,
                       select=select, undo=undo, clear=clear, summary=summary)
 

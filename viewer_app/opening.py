@@ -20,7 +20,8 @@ if TYPE_CHECKING:
     from recon.types import Angiogram
     from viewer_app.access import FileAccess
 
-__all__ = ["header_geometries", "keep_upload", "page_wording", "read_pair", "typed_overrides"]
+__all__ = ["header_geometries", "keep_upload", "page_wording", "patients_differ", "read_pair",
+           "typed_overrides"]
 
 VIEW_KEYS = ("a", "b")
 
@@ -52,6 +53,21 @@ def header_geometries(paths: tuple[str, str]) -> dict[str, dict] | None:
         return {k: describe_file(p)["geometry"] for k, p in zip(VIEW_KEYS, paths, strict=True)}
     except LoadError:
         return None
+
+
+def patients_differ(paths: tuple[str, str]) -> bool:
+    """Whether files A and B (``paths``) name different patients: their PatientID, or
+    their PatientName, differ where both files have one (an image file has neither).
+    The values themselves are never returned, shown or logged."""
+    from recon.io.describe import describe_file
+
+    try:
+        a, b = (describe_file(p, show_patient=True) for p in paths)
+    except LoadError:  # both were just read: a file that changed since is not judged here
+        return False
+    return any(str(a.get(k) or "").strip() and str(b.get(k) or "").strip()
+               and str(a.get(k)).strip() != str(b.get(k)).strip()
+               for k in ("patient_id", "patient_name"))
 
 
 def typed_overrides(paths: tuple[str, str], entries: dict[str, dict[str, str]]

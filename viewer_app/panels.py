@@ -37,6 +37,7 @@ from viewer_app.folders import (
     seeds_folder,
 )
 from viewer_app.marks import MODE_LABELS
+from viewer_app.patients import PATIENTS_DIFFER_TEXT
 from viewer_app.plot import profile_plot
 from viewer_app.results import (
     NO_RECONSTRUCTION_TEXT,
@@ -143,6 +144,12 @@ class Panels:
         self.marks.warning.content = "" if warning is None else f"⚠ **Views too similar**: " \
             f"{warning}"
         self.marks.warning.visible = warning is not None
+
+    def show_patients(self, waiting: bool) -> None:
+        """The warning of two patients and its confirmation button at the top of the Marks
+        folder while the pair waits for the confirmation, else neither."""
+        self.marks.patients.content = f"⚠ {PATIENTS_DIFFER_TEXT}" if waiting else ""
+        self.marks.patients.visible = self.marks.confirm_patients.visible = waiting
 
     def show_marks(self, st: MarkState, last_click_ms: float, autosave_path: str | Path) -> None:
         """The segment and selection lists, and the marks summary."""

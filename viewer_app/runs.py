@@ -52,6 +52,8 @@ class RunCommands:
     shown_branch: int
     progress_log: list[tuple[str, float]]
     _busy: bool
+    patients_differ: bool  # files A and B name different patients ...
+    patients_confirmed: bool  # ... and the clinician confirmed them as one patient's
     _lock: threading.RLock
 
     # ... and the app's services (methods of ViewerApp)
@@ -67,6 +69,7 @@ class RunCommands:
         def run() -> CalibrationResult:
             from recon.pipeline import calibrate_from_seeds
 
+            self._refuse_two_patients()
             with self._lock:
                 seeds, segment = tree_view.seeds_for_run(self.state)
                 a, b = self.views["a"].angio, self.views["b"].angio
@@ -107,6 +110,7 @@ class RunCommands:
                 h.body = f"{stage} ({fraction * 100:.0f} %)"
 
         def run() -> Result:
+            self._refuse_two_patients()
             with self._lock:
                 seeds, segment = tree_view.seeds_for_run(self.state)
                 view_a, view_b = self.views["a"], self.views["b"]
@@ -140,6 +144,12 @@ class RunCommands:
                 return self.guard("Reconstruct", client, run)
         finally:
             self._busy = False
+
+    def _refuse_two_patients(self) -> None:
+        """Raise ValueError while files A and B name different patients unconfirmed."""
+        if self.patients_differ and not self.patients_confirmed:
+            raise ValueError("files A and B name different patients: open two views of one "
+                             "patient, or confirm under Marks that they are one patient's")
 
     def _clear_results(self) -> None:
         scene.clear_results(self.server.scene, self.views)

@@ -512,3 +512,43 @@ def test_a_catheter_found_is_drawn_dashed_and_reported(app: ViewerApp) -> None:
     assert report["a"] == [] and report["b"][0]["tip_px"] == [100.0, round(rows / 2, 1)]
     clear_results(app.server.scene, app.views)
     assert app.server.scene.get_handle_by_name("/over_b/catheter") is None
+
+
+def _other_patient_copy(src: Path, out: Path, patient_id: str = "OTHER-PATIENT-4711") -> Path:
+    """A copy of ``src`` whose PatientID is another patient's (changed with pydicom)."""
+    import pydicom
+
+    ds = pydicom.dcmread(src)
+    ds.PatientID = patient_id
+    ds.save_as(out)
+    return out
+
+
+def test_two_patients_are_refused_until_the_page_confirms_them(
+        app: ViewerApp, demo_case: dict[str, Path], tmp_path: Path,
+        caplog: pytest.LogCaptureFixture) -> None:
+    """Issue 46 item 3: a pair whose files name different patients opens with the warning
+    and its button shown, Calibrate and Reconstruct refuse, and the confirmation lets them
+    run; the patient ID itself is nowhere on the page nor in the log."""
+    other = _other_patient_copy(demo_case["b"], tmp_path / "b_other.dcm")
+    app.access.add_read_root(tmp_path)
+    assert not app.patients_differ and not app.panels.marks.patients.visible
+    with caplog.at_level("DEBUG"):
+        assert app.open_pair(str(demo_case["a"]), str(other))
+        assert app.patients_differ and not app.patients_confirmed
+        marks = app.panels.marks
+        assert marks.patients.visible and marks.confirm_patients.visible
+        assert "different patients" in marks.patients.content
+        app.load_seeds(str(demo_case["seeds"]))
+        assert app.calibrate() is None and app.reconstruct() is None
+        assert app.notifications[-1][2].startswith("files A and B name different patients")
+        assert app.reconstruction is None
+        app.confirm_one_patient()
+        assert not marks.patients.visible and not marks.confirm_patients.visible
+        assert app.reconstruct() is not None, app.notifications[-3:]
+    shown = " ".join(str(x) for n in app.notifications for x in n) + marks.patients.content \
+        + app.panels.case.info.content
+    assert "OTHER-PATIENT-4711" not in shown and "OTHER-PATIENT-4711" not in caplog.text
+    # One patient's files again: no warning, nothing to confirm.
+    assert app.open_pair(str(demo_case["a"]), str(demo_case["b"]))
+    assert not app.patients_differ and not app.panels.marks.patients.visible

@@ -182,3 +182,45 @@ def test_no_earlier_result_is_shown_as_current_on_the_page(
         finally:
             b.close()
             app.stop()
+
+
+def test_two_patients_wait_for_a_confirmation_the_page_shows(
+    demo_case: dict[str, Path], tmp_path: Path, artifacts_dir: Path
+) -> None:
+    """Issue 46 item 3 with the mouse: file B of another patient (its PatientID changed
+    with pydicom). The page opens with a dialog saying that the files name different
+    patients; closed, Reconstruct is refused in one line; the Marks folder's confirmation
+    lets it run. The patient ID is nowhere on the page."""
+    import pydicom
+
+    sync_api = pytest.importorskip("playwright.sync_api", reason="playwright is not installed")
+    ds = pydicom.dcmread(demo_case["b"])
+    ds.PatientID = "OTHER-PATIENT-4711"
+    other = tmp_path / "b_other_patient.dcm"
+    ds.save_as(other)
+    app = ViewerApp(str(demo_case["a"]), str(other), str(demo_case["seeds"]), port=0,
+                    autosave_path=tmp_path / "autosave.json")
+    app.wait_ready()
+    with sync_api.sync_playwright() as pw:
+        b = Browser(pw, tmp_path / "profile", artifacts_dir)
+        try:
+            b.open(app)
+            dialog = b.page.get_by_text("Files A and B name").first
+            dialog.wait_for(state="visible", timeout=10_000)
+            b.shot("answers_7_two_patients_dialog.png")
+            assert "OTHER-PATIENT-4711" not in b.page.inner_text("body")
+            b.page.get_by_role("button", name="Close (Reconstruct stays refused)").click()
+            n_notes = len(app.notifications)
+            assert not _reconstructed(b, app, n_notes)
+            assert app.notifications[-1][2].startswith("files A and B name different patients")
+            b.page.get_by_text("name different patients: open two views").first.wait_for(
+                state="visible", timeout=10_000)
+            b.shot("answers_8_two_patients_refused.png")
+            b.page.get_by_role("button", name="They are one patient's views").first.click()
+            wait_for(lambda: app.patients_confirmed, 10, "the confirmation")
+            assert _reconstructed(b, app, len(app.notifications))
+            assert app.reconstruction is not None
+            assert "OTHER-PATIENT-4711" not in b.page.inner_text("body")
+        finally:
+            b.close()
+            app.stop()
