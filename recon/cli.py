@@ -223,6 +223,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--report", action="store_true",
                    help="also write report.pdf, a one-page report beside report.json (no "
                    "patient name, ID or date unless --identify)")
+    p.add_argument("--allow-different-patients", action="store_true",
+                   help="go on, with a warning, when files A and B name different patients "
+                   "(their PatientID differs; refused otherwise)")
     p.add_argument("--identify", action="store_true",
                    help="put the patient name, ID and study date from the DICOM headers in "
                    "report.pdf")
@@ -387,6 +390,13 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
     formats = _mesh_formats(args.format)
     if formats is None:
         return EXIT_USER_ERROR
+    from recon.io.patients import check_same_patient
+
+    patients = check_same_patient(file_a, file_b, allow_different=args.allow_different_patients,
+                                  hint="give --allow-different-patients to go on anyway")
+    if patients.same_patient is False:  # allowed: said, never the identifiers
+        print(f"coronary3d: warning: {patients.message()}; going on as asked",
+              file=sys.stderr)
 
     def progress(stage: str, fraction: float) -> None:
         if not args.quiet:
