@@ -38,7 +38,9 @@ the same in the base run and all N jittered runs
 (:func:`recon.lumen.lesions.lesion_sets_equal`: as many, each one's MLD inside the
 other's extent; a case with a failed run is not stable). ``lesion_set_stable_delta``
 is the same figure had every narrowing of at least the disease threshold delta
-been a lesion (no % stenosis floor), to show what the floor buys.
+been a lesion (no % stenosis floor), to show what the floor buys;
+``lesion_set_stable_completed`` is ``lesion_set_stable`` over the cases whose runs all
+ran (a refused jittered trace leaves no lesion set to compare).
 """
 
 from __future__ import annotations
@@ -439,6 +441,10 @@ def _stability_figures(cases: list[dict]) -> dict:
         "site_spread_mm_max": percentile([c["site_spread_mm"] for c in cases], 100),
         "lesion_set_stable": _fraction(cases, "lesion_set_stable"),
         "lesion_set_stable_delta": _fraction(cases, "lesion_set_stable_delta"),
+        # the same over the cases whose runs all ran (a refused trace has no lesion set)
+        "lesion_set_stable_completed": _fraction(
+            [c for c in cases if c["failed_runs"] == 0 and not c["base_failed"]],
+            "lesion_set_stable"),
         "lesions_per_run_median": median(n for c in cases for n in c.get("lesion_counts", [])),
     }
 
