@@ -147,6 +147,7 @@ class ResultsPanel:
     layout: viser.GuiDropdownHandle  # Angiograms / Angiograms + 3D / 3D model
     branch: viser.GuiDropdownHandle  # a tree's branch shown (the Segment dropdown's twin)
     branch_note: viser.GuiMarkdownHandle  # which branch the table and chart are of
+    warnings: viser.GuiMarkdownHandle  # the result's warnings (report.json's), hidden if none
     clinical: viser.GuiMarkdownHandle  # the measurements in clinical words
     plot: viser.GuiImageHandle
     lesion_start: viser.GuiSliderHandle  # lesion ends (mm along the vessel), movable
@@ -443,6 +444,7 @@ def results_folder(gui: viser.GuiApi, app: PageCommands, refreshing: Refreshing)
             app.guard("Branch", event.client, lambda: app.set_segment(str(branch.value)))
 
         branch_note = gui.add_markdown("", visible=False)
+        warnings = gui.add_markdown("", visible=False)
         clinical = gui.add_markdown("")
         plot = gui.add_image(np.full((8, 8, 3), 255, np.uint8),
                              label="Diameter along the vessel", visible=False)
@@ -464,7 +466,8 @@ def results_folder(gui: viser.GuiApi, app: PageCommands, refreshing: Refreshing)
         with gui.add_folder("Details (engineering)", expand_by_default=False):
             markdown = gui.add_markdown("")
     return ResultsPanel(reconstruct=reconstruct, progress=progress, stale=stale, layout=layout,
-                        branch=branch, branch_note=branch_note, clinical=clinical,
+                        branch=branch, branch_note=branch_note, warnings=warnings,
+                        clinical=clinical,
                         plot=plot, lesion_start=lesion_start,
                         lesion_end=lesion_end, reference_proximal=ref_prox,
                         reference_distal=ref_dist, bifurcations=bifurcations,

@@ -49,6 +49,7 @@ from viewer_app.results import (
     info_markdown,
     marks_markdown,
     results_markdown,
+    warnings_markdown,
 )
 from viewer_app.tree_view import branch_heading, branch_names, is_tree
 
@@ -202,8 +203,15 @@ class Panels:
         r.markdown.content = NO_RECONSTRUCTION_TEXT
         self.calibrate.markdown.content = NOT_CALIBRATED_TEXT
         for h in (r.plot, r.lesion_start, r.lesion_end, r.reference_proximal,
-                  r.reference_distal, r.branch, r.branch_note, r.bifurcations):
+                  r.reference_distal, r.branch, r.branch_note, r.bifurcations, r.warnings):
             h.visible = False
+        r.warnings.content = ""
+
+    def show_warnings(self, result: Reconstruction | TreeReconstruction) -> None:
+        """The result's warnings above its table (results.warnings_markdown), or none."""
+        text = warnings_markdown(result)
+        self.results.warnings.content = text
+        self.results.warnings.visible = bool(text)
 
     def show_tree(self, result: Reconstruction | TreeReconstruction, shown: int) -> None:
         """A tree's results: the Branch dropdown (branch ``shown`` chosen), the line naming

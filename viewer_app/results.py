@@ -35,9 +35,11 @@ __all__ = [
     "lesion_measurements",
     "fmt",
     "info_markdown",
+    "input_warning_lines",
     "marks_markdown",
     "results_markdown",
     "segments_lines",
+    "warnings_markdown",
 ]
 
 NO_RECONSTRUCTION_TEXT = "No reconstruction yet."
@@ -80,10 +82,33 @@ def info_markdown(angio_a: Angiogram, angio_b: Angiogram, name_a: str, name_b: s
                 f"{angio_b.frame_index + 1}/{angio_b.n_frames} |")
     separation = view_separation_deg(ga, gb)
     rows.append(f"\nViews {separation:.0f}° apart.")
+    rows += [f"\n⚠ {w}" for w in input_warning_lines(angio_a, angio_b)]
     warning = close_views_warning(ga, gb)
     if warning is not None:
         rows.append(f"⚠ **Views too similar**: {warning}")
     return "\n".join(rows)
+
+
+def input_warning_lines(angio_a: Angiogram, angio_b: Angiogram) -> list[str]:
+    """What the files themselves make less certain, one line each, as the reconstruction
+    will report it (recon.pipeline.input_warnings: an 8-bit, lossy or display-processed
+    image's radii)."""
+    from recon.pipeline import input_warnings
+
+    return (input_warnings(getattr(angio_a, "info", {}), "A")
+            + input_warnings(getattr(angio_b, "info", {}), "B"))
+
+
+def warnings_markdown(result: object) -> str:
+    """The reconstruction's warnings a clinician must read with its figures (report.json
+    ``warnings``: the inputs, the views' separation, stretches the cross-view check
+    flagged, a bifurcation's doubtful origin) and a calibration that does not fit the
+    clicks (:func:`calibration_doubts`); "" when there is none."""
+    lines = list(dict.fromkeys([*getattr(result, "warnings", ()),
+                                *calibration_doubts(getattr(result, "calibration", None))]))
+    if not lines:
+        return ""
+    return "\n".join(["**Read with these figures:**", ""] + [f"- ⚠ {w}" for w in lines])
 
 
 def close_views_warning(view_a: ViewGeometry, view_b: ViewGeometry) -> str | None:

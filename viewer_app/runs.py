@@ -210,6 +210,7 @@ class RunCommands:
             tree_view.highlight_branch(self.server.scene, self.views, rec, self.model, index)
         self.panels.show_reconstruction(tree_view.branches_of(rec)[index])
         self.panels.show_tree(rec, index)
+        self.panels.show_warnings(rec)  # the whole result's (a rename renames them too)
 
     @property
     def branch(self) -> Reconstruction | None:

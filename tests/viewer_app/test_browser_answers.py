@@ -224,3 +224,40 @@ def test_two_patients_wait_for_a_confirmation_the_page_shows(
         finally:
             b.close()
             app.stop()
+
+
+def test_the_inputs_warnings_are_on_the_page(
+    demo_case: dict[str, Path], tmp_path: Path, artifacts_dir: Path
+) -> None:
+    """Issue 46 item 6: file B stored display-processed (its PixelIntensityRelationship
+    set to DISP with pydicom): the case table says so as soon as the pair is open, and
+    the results say it above their table after Reconstruct (it was in report.json only)."""
+    import pydicom
+
+    sync_api = pytest.importorskip("playwright.sync_api", reason="playwright is not installed")
+    ds = pydicom.dcmread(demo_case["b"])
+    ds.PixelIntensityRelationship = "DISP"
+    shown_b = tmp_path / "b_display.dcm"
+    ds.save_as(shown_b)
+    app = ViewerApp(str(demo_case["a"]), str(shown_b), str(demo_case["seeds"]), port=0,
+                    autosave_path=tmp_path / "autosave.json")
+    app.wait_ready()
+    line = "view B: display-processed image (PixelIntensityRelationship DISP)"
+    with sync_api.sync_playwright() as pw:
+        b = Browser(pw, tmp_path / "profile", artifacts_dir)
+        try:
+            b.open(app)
+            case = b.page.get_by_text(line).first
+            case.scroll_into_view_if_needed()
+            case.wait_for(state="visible", timeout=10_000)
+            b.shot("answers_9_input_warning_case.png")
+            assert _reconstructed(b, app, len(app.notifications))
+            assert any(line in w for w in app.reconstruction.warnings)
+            assert line in app.panels.results.warnings.content
+            heading = b.page.get_by_text("Read with these figures:").first
+            heading.scroll_into_view_if_needed()
+            heading.wait_for(state="visible", timeout=10_000)
+            b.shot("answers_10_input_warning_results.png")
+        finally:
+            b.close()
+            app.stop()

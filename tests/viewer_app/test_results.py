@@ -18,6 +18,7 @@ from viewer_app.results import (
     lesion_measurements,
     marks_markdown,
     results_markdown,
+    warnings_markdown,
 )
 
 
@@ -64,6 +65,32 @@ def test_info_warns_when_the_views_are_too_similar() -> None:
     assert "Views too similar" in text and "refuse" in text
     far = info_markdown(_angio(-30.0, 0.0, 0, 1), _angio(30.0, 0.0, 0, 1), "a.dcm", "b.dcm")
     assert "too similar" not in far
+
+
+def test_the_case_table_says_what_the_files_make_less_certain() -> None:
+    """Issue 46 item 6: an 8-bit, display-processed file is named in the case table as
+    soon as the pair is open (it was in report.json only)."""
+    b = _angio(30.7, 23.6, 0, 1)
+    b.info = {"bits_stored": 8, "pixel_intensity_relationship": "DISP"}
+    text = info_markdown(_angio(-29.3, 25.5, 0, 1), b, "a.dcm", "b.dcm")
+    assert ("⚠ view B: 8-bit, display-processed image (PixelIntensityRelationship DISP); "
+            "its radii are less certain") in text
+    assert "view A" not in text
+
+
+def test_the_results_warnings_and_a_doubtful_calibration_head_the_results() -> None:
+    calibration = SimpleNamespace(warnings=(
+        "underdetermined: 3 features constrain fewer than the 5 observable pose parameters",
+        "feature 3 is still 14.5 px off after calibration; check the click",
+        "implausible correction: 6.7 deg and 9.7 mm (header errors are expected below ...)"))
+    result = SimpleNamespace(warnings=("view B: 8-bit image; its radii are less certain",),
+                             calibration=calibration)
+    text = warnings_markdown(result)
+    assert text.splitlines()[0] == "**Read with these figures:**"
+    assert "- ⚠ view B: 8-bit image; its radii are less certain" in text
+    assert "- ⚠ feature 3 is still 14.5 px off after calibration; check the click" in text
+    assert "implausible correction" in text and "underdetermined" not in text
+    assert warnings_markdown(SimpleNamespace(warnings=(), calibration=None)) == ""
 
 
 def test_marks_summary() -> None:
