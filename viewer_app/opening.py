@@ -56,18 +56,13 @@ def header_geometries(paths: tuple[str, str]) -> dict[str, dict] | None:
 
 
 def patients_differ(paths: tuple[str, str]) -> bool:
-    """Whether files A and B (``paths``) name different patients: their PatientID, or
-    their PatientName, differ where both files have one (an image file has neither).
-    The values themselves are never returned, shown or logged."""
-    from recon.io.describe import describe_file
+    """Whether files A and B (``paths``) name different patients: their PatientID differ
+    (:func:`recon.io.patients.patient_check`, headers only; unknown for an image file or
+    a file without one, which is not refused here). The IDs are never returned, shown
+    or logged."""
+    from recon.io.patients import patient_check
 
-    try:
-        a, b = (describe_file(p, show_patient=True) for p in paths)
-    except LoadError:  # both were just read: a file that changed since is not judged here
-        return False
-    return any(str(a.get(k) or "").strip() and str(b.get(k) or "").strip()
-               and str(a.get(k)).strip() != str(b.get(k)).strip()
-               for k in ("patient_id", "patient_name"))
+    return patient_check(*paths).same_patient is False
 
 
 def typed_overrides(paths: tuple[str, str], entries: dict[str, dict[str, str]]

@@ -1,7 +1,7 @@
 """Two files of two patients: the page stops and asks before anything is computed.
 
-When the two files opened name different patients (their PatientID, or their
-PatientName, differ where both have one; read through :mod:`recon.io`), the pair is
+When the two files opened name different patients (their PatientID differ,
+:func:`recon.io.patients.patient_check`), the pair is
 shown but Calibrate and Reconstruct refuse until the clinician confirms, on the page,
 that they are one patient's views (an anonymised copy, say). Every page shows a dialog
 saying so, with the confirmation; the Marks folder keeps the warning and its button.
