@@ -209,6 +209,10 @@ def build_parser() -> argparse.ArgumentParser:
         "header (no correction) or curves (full, from the clicks and the traced curves)",
     )
     p.add_argument(
+        "--tracer", choices=("2d", "3d"), default="2d",
+        help="2d: trace each view on its own (default); 3d: calibrate on the clicks first, "
+        "then trace a 3D path both views vote on (experimental)")
+    p.add_argument(
         "--allow-close-views",
         action="store_true",
         help="go on, with a warning, when the two views are less than 25 deg apart "
@@ -313,6 +317,8 @@ def build_parser() -> argparse.ArgumentParser:
         help="reconstruct, regular suite: run the cases on a local Dask cluster of N "
         "worker processes (the engine of `coronary3d batch`)",
     )
+    p.add_argument("--tracer", choices=("2d", "3d"), default="2d",
+                   help="reconstruct, regular and varied suites: the pipeline's tracer")
     return parser
 
 
@@ -436,6 +442,7 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
         intensity_b=args.intensity_b,
         allow_close_views=args.allow_close_views,
         calibration=args.calibration,
+        tracer=args.tracer,
         aortic_pressure_mmhg=args.aortic_pressure,
         ffr_velocity_m_s=args.ffr_velocity,
         ffr_split_exponent=args.ffr_split_exponent,
@@ -650,6 +657,12 @@ def cmd_bench(args: argparse.Namespace) -> int:
                   "suite), intervals and calibration-modes", file=sys.stderr)
             return EXIT_USER_ERROR
         extra["workers"] = args.workers
+    if args.tracer != "2d":
+        if args.name != "reconstruct" or tree_suite:
+            print("coronary3d: error: --tracer is for bench reconstruct (regular and varied "
+                  "suites)", file=sys.stderr)
+            return EXIT_USER_ERROR
+        extra["tracer"] = args.tracer
     if tree_suite:
         if args.jitter:
             print("coronary3d: error: --jitter is for the regular and varied suites",

@@ -53,16 +53,24 @@ from recon.pose import (
     CalibrationResult,
     MeasurementIntervals,
     OptimalView,
-    calibrate,
     calibrate_supported,
     calibrate_with_curves,
+    calibration_step,
     measurement_intervals,
     observability,
     optimal_view,
-    refine_with_matches,
+    self_calibrate,
 )
 from recon.seeds import Seeds
 from recon.trace import VesselnessMap, compute_vesselness, trace_pair
+from recon.trace3d import (
+    CORRIDOR_MIN_PX,
+    Path3D,
+    ambiguous_stretches,
+    path_shift_px,
+    snap_ends,
+    trace_in_3d,
+)
 from recon.types import Angiogram, Centerline2D, Centerline3D, Matching, arclength
 
 __all__ = [
@@ -85,6 +93,10 @@ CALIBRATION_CHOICES: dict[str, tuple[str, ...]] = {
     "header": ("header",),
     "curves": ("full",),  # the full clicks-only correction, then the curves jointly
 }
+#: The tracers: "2d" traces each view on its own (recon.trace); "3d" traces a 3D path
+#: that both views vote on and refines each view in a corridor around its image
+#: (recon.trace3d).
+TRACER_CHOICES = ("2d", "3d")
 
 
 class PipelineError(CoronaryError):
@@ -116,6 +128,8 @@ class ReconstructionOptions:
         B's rig, or the full correction), "header" (B stays at its header pose) or
         "curves" (the full correction from the clicks and the two traced curves
         jointly, :func:`recon.pose.calibration_curves.calibrate_with_curves`).
+    tracer : "2d" or "3d" (:data:`TRACER_CHOICES`). With "3d", view B is calibrated on the
+        clicks first, then both views' traces come from a 3D path both views vote on.
     aortic_pressure_mmhg, ffr_velocity_m_s, ffr_split_exponent : the FFR model's mean
         aortic pressure, healthy hyperemic velocity and bifurcation flow-split exponent
         (:class:`recon.lumen.ffr.FFRModel`; its defaults).
@@ -134,6 +148,7 @@ class ReconstructionOptions:
     intensity_b: str = "auto"
     allow_close_views: bool = False
     calibration: str = "full"
+    tracer: str = "2d"
     aortic_pressure_mmhg: float = FFRModel.aortic_pressure_mmhg
     ffr_velocity_m_s: float = FFRModel.velocity_m_s
     ffr_split_exponent: float = FFRModel.split_exponent
@@ -171,6 +186,8 @@ class Reconstruction:
     intervals: MeasurementIntervals | None = None
     # FFR along the segment (recon.lumen.ffr; a model estimate for research), or None
     ffr: FFRResult | None = None
+    # the 3D tracer's path (recon.trace3d), or None (the 2D tracer)
+    path_3d: Path3D | None = None
 
     @functools.cached_property
     def lesions(self) -> LesionReport:
@@ -264,9 +281,18 @@ class Reconstruction:
             "consistency": self.consistency.to_dict() if self.consistency is not None else None,
             "optimal_view": (self.optimal_view.to_dict() if self.optimal_view is not None
                              else None),
+            "tracer": _tracer_report(self.options.tracer, self.path_3d),
             "warnings": list(self.warnings),
             "timings_ms": self.timings_ms,
         }
+
+
+def _tracer_report(tracer: str, path: Path3D | None) -> dict:
+    """The tracer used and, for the 3D tracer, the stretches two views cannot settle."""
+    if path is None:
+        return {"kind": tracer}
+    return {"kind": tracer, "path_length_mm": round(float(path.s_mm[-1]), 2),
+            "ambiguous_stretches": ambiguous_stretches(path)}
 
 
 def _notify(progress: Progress | None, stage: str, fraction: float) -> None:
@@ -294,6 +320,24 @@ def _features(seeds: Seeds, segment_index: int, cl_a: Centerline2D | None = None
     pa = [ends_a] + [np.asarray([f.a_px]) for f in seeds.features]
     pb = [ends_b] + [np.asarray([f.b_px]) for f in seeds.features]
     return np.vstack(pa), np.vstack(pb)
+
+
+def _pose_from_clicks(seeds: Seeds, options: ReconstructionOptions,
+                      vmaps: tuple[VesselnessMap, VesselnessMap], view_a: ViewGeometry,
+                      view_b_header: ViewGeometry) -> CalibrationResult:
+    """View B calibrated on the end clicks (snapped, or as clicked where that meets the
+    other view better) and the landmarks: the pose before any trace."""
+    seg = _segment(seeds, options.segment)
+    ends_a, ends_b = snap_ends(vmaps, seg.a, seg.b, view_a, view_b_header)
+    pa = np.vstack([ends_a] + [np.asarray([f.a_px]) for f in seeds.features])
+    pb = np.vstack([ends_b] + [np.asarray([f.b_px]) for f in seeds.features])
+    return calibrate_view_b(view_a, view_b_header, pa, pb, options)
+
+
+def _pose_tolerance_px(cal: CalibrationResult) -> float:
+    """B's remaining pose error (px) the 3D path allows across the epipolar lines: twice
+    the calibration's mean back-projection error, 1-4 px."""
+    return float(np.clip(2.0 * cal.error_after_px, 1.0, 4.0))
 
 
 def check_calibration(options: ReconstructionOptions) -> None:
@@ -378,6 +422,9 @@ def reconstruct_pair(
     options = options or ReconstructionOptions()
     seg = _segment(seeds, options.segment)
     check_calibration(options)
+    if options.tracer not in TRACER_CHOICES:
+        raise PipelineError(f"unknown tracer {options.tracer!r} (use one of "
+                            f"{', '.join(TRACER_CHOICES)})")
     view_a, view_b_header = angio_a.geometry, angio_b.geometry
     close_views = _check_separation(view_a, view_b_header, options.allow_close_views)
     timings: dict[str, float] = {}
@@ -397,9 +444,19 @@ def reconstruct_pair(
             compute_vesselness(angio_a.image, pixel_mm=pixel_mm_a),
             compute_vesselness(angio_b.image, pixel_mm=pixel_mm_b),
         )
-    if traced is None:
+    intensity = (options.intensity_a, options.intensity_b)
+    path3d = None
+    if traced is None and options.tracer == "3d":
+        # 1'. Pose first: B calibrated on the end clicks and the landmarks (no trace needed);
+        #     then a 3D path that both views vote on fixes each view's trace (recon.trace3d).
+        pre = _pose_from_clicks(seeds, options, vesselness, view_a, view_b_header)
+        tol_px = _pose_tolerance_px(pre)
+        t3 = trace_in_3d((angio_a, angio_b), (seg.a, seg.b), vesselness, view_a, pre.view_b,
+                         intensity, tol_px)
+        traced, path3d = t3.traced, t3.path
+    elif traced is None:
         traced = trace_pair((angio_a, angio_b), (seg.a, seg.b), vesselness,
-                             (pixel_mm_a, pixel_mm_b), (options.intensity_a, options.intensity_b))
+                            (pixel_mm_a, pixel_mm_b), intensity)
     cl_a, cl_b = traced
     lap("trace")
 
@@ -408,7 +465,16 @@ def reconstruct_pair(
     feat_a, feat_b = _features(seeds, options.segment, cl_a, cl_b)
     cal = calibration or calibrate_view_b(view_a, view_b_header, feat_a, feat_b, options,
                                           (cl_a.points_px, cl_b.points_px))
-    steps = [_step("features" if calibration is None else "tree", cal)]
+    if path3d is not None and path_shift_px(path3d, pre.view_b, cal.view_b) > max(
+            tol_px, CORRIDOR_MIN_PX):
+        # the pose on the traces moved the path's image in B out of the corridor: again
+        t3 = trace_in_3d((angio_a, angio_b), (seg.a, seg.b), vesselness, view_a, cal.view_b,
+                         intensity, tol_px)
+        (cl_a, cl_b), path3d = t3.traced, t3.path
+        feat_a, feat_b = _features(seeds, options.segment, cl_a, cl_b)
+        cal = calibrate_view_b(view_a, view_b_header, feat_a, feat_b, options,
+                               (cl_a.points_px, cl_b.points_px))
+    steps = [calibration_step("features" if calibration is None else "tree", cal)]
     lap("calibrate")
 
     # 3. Point correspondence: epipolar COST, CBOCD, adaptive-step DP (eqs. 6-10).
@@ -420,9 +486,9 @@ def reconstruct_pair(
     #    refinement over all matched points; matching is redone with the result.
     if options.self_calibration:
         _notify(progress, "refining the geometry with the matched points", 0.6)
-        cal, matching, extra = _self_calibrate(
-            view_a, view_b_header, feat_a, feat_b, cl_a, cl_b, cal, matching, options
-        )
+        cal, matching, extra = self_calibrate(
+            view_a, view_b_header, feat_a, feat_b, cl_a, cl_b, cal, matching,
+            options.optimizer, options.matcher)
         steps += extra
         lap("self_calibrate")
 
@@ -443,6 +509,9 @@ def reconstruct_pair(
     warnings = close_views + input_warnings(angio_a.info, "A") + input_warnings(angio_b.info, "B")
     warnings += [f"view {st.view.upper()}, {st.start_mm:.1f}-{st.end_mm:.1f} mm of the 3D "
                  f"centerline: {st.reason}" for st in consistency.stretches]
+    if path3d is not None:
+        warnings += [f"{st['start_mm']:.1f}-{st['end_mm']:.1f} mm of the 3D path "
+                     f"{st['reason']}; check the trace there" for st in ambiguous_stretches(path3d)]
     lap("consistency")
 
     # 6. Elliptic cross-sections and the watertight surface (sec. 3.5).
@@ -506,6 +575,7 @@ def reconstruct_pair(
         optimal_view=next_view,
         intervals=intervals,
         ffr=ffr,
+        path_3d=path3d,
     )
 
 
@@ -605,55 +675,3 @@ def _intensity_report(cl: Centerline2D) -> dict:
         "power": cl.intensity_power,
         "blur_px": cl.blur_px,
     }
-
-
-def _step(name: str, cal: CalibrationResult) -> dict:
-    return {
-        "step": name,
-        "features": cal.n_features,
-        "iterations": cal.iterations,
-        "ms": round(cal.elapsed_ms, 2),
-        "error_after_px": cal.error_after_px,
-    }
-
-
-def _self_calibrate(
-    view_a: ViewGeometry,
-    view_b_header: ViewGeometry,
-    feat_a: np.ndarray,
-    feat_b: np.ndarray,
-    cl_a: Centerline2D,
-    cl_b: Centerline2D,
-    cal: CalibrationResult,
-    matching: Matching,
-    options: ReconstructionOptions,
-) -> tuple[CalibrationResult, Matching, list[dict]]:
-    """Sec. 3.4.2: add deviation pairs as features and calibrate again; then refine
-    over every matched pair (robust, with the priors) and match once more."""
-    steps: list[dict] = []
-    if len(matching.deviation_a_px):
-        pa = np.vstack([feat_a, matching.deviation_a_px])
-        pb = np.vstack([feat_b, matching.deviation_b_px])
-        cal = calibrate(view_a, view_b_header, pa, pb, method=options.optimizer)
-        steps.append(_step("deviation pairs", cal))
-        matching = match_centerlines(cl_a, cl_b, view_a, cal.view_b, method=options.matcher)
-    # Refinement over the matched centerline (about one pair per 4 px of vessel,
-    # robust Huber loss, priors centred on the header).
-    stride = max(1, len(matching.points_a_px) // 100)
-    matched_a, matched_b = matching.points_a_px[::stride], matching.points_b_px[::stride]
-    if options.optimizer == "palm":
-        cal = refine_with_matches(
-            view_a, view_b_header, feat_a, feat_b, matched_a, matched_b, initial=cal
-        )
-    else:  # the baselines have no robust loss: plain least squares on the same points
-        cal = calibrate(
-            view_a,
-            view_b_header,
-            np.vstack([feat_a, matched_a]),
-            np.vstack([feat_b, matched_b]),
-            method=options.optimizer,
-        )
-    steps.append(_step("matched points", cal))
-    matching = match_centerlines(cl_a, cl_b, view_a, cal.view_b, method=options.matcher)
-    return cal, matching, steps
-

@@ -49,6 +49,8 @@ from recon.pipeline import (
     ReconstructionOptions,
     _check_separation,
     _notify,
+    _pose_from_clicks,
+    _pose_tolerance_px,
     calibrate_view_b,
     check_calibration,
     ffr_model,
@@ -57,6 +59,7 @@ from recon.pipeline import (
 from recon.pose import CalibrationResult, measurement_intervals, optimal_view, refine_with_matches
 from recon.seeds import Seeds, Segment
 from recon.trace import TraceError, VesselnessMap, compute_vesselness, trace_pair
+from recon.trace3d import trace_in_3d
 from recon.types import Angiogram, Centerline2D, arclength
 
 __all__ = [
@@ -210,12 +213,20 @@ def reconstruct_tree(
     if vesselness is None:
         vesselness = (compute_vesselness(angio_a.image, pixel_mm=view_a.pixel_mm_at_isocenter),
                       compute_vesselness(angio_b.image, pixel_mm=view_b.pixel_mm_at_isocenter))
-    traced = [_trace_both(angio_a, angio_b, seg, vesselness, options, len(seeds.segments))
-              for seg in seeds.segments]
+    one = len(seeds.segments) == 1
+    # the 3D tracer: view B calibrated on the root's end clicks and the landmarks first
+    # (the one-segment reconstruction does it itself)
+    pose = None
+    if options.tracer == "3d" and not one:
+        pre = _pose_from_clicks(seeds, replace(options, segment=0), vesselness, view_a, view_b)
+        pose = (pre.view_b, _pose_tolerance_px(pre))
+    traced = [None] if one and options.tracer == "3d" else [
+        _trace_both(angio_a, angio_b, seg, vesselness, options, len(seeds.segments), pose)
+        for seg in seeds.segments]
     if len(traced) > 1:
         traced = _mark_tree_overlaps(traced)
     timings["trace"] = _ms(t0)
-    if len(seeds.segments) == 1:  # exactly the one-segment reconstruction
+    if one:  # exactly the one-segment reconstruction
         rec = reconstruct_pair(angio_a, angio_b, seeds, replace(options, segment=0), progress,
                                vesselness, traced=traced[0])
         calibration = rec.calibration
@@ -475,10 +486,15 @@ def _origin_from_the_clear_view(pair: tuple[Centerline2D, Centerline2D],
 
 def _trace_both(angio_a: Angiogram, angio_b: Angiogram, seg: Segment,
                 vesselness: tuple[VesselnessMap, VesselnessMap], options: ReconstructionOptions,
-                n_segments: int) -> tuple[Centerline2D, Centerline2D]:
-    """One segment's traces in A and B; in a tree, a failure names the segment."""
+                n_segments: int, pose: tuple[ViewGeometry, float] | None = None,
+                ) -> tuple[Centerline2D, Centerline2D]:
+    """One segment's traces in A and B; in a tree, a failure names the segment. ``pose``:
+    B's pose from the clicks and its tolerance (px), for the 3D tracer (None: 2D)."""
     view_a, view_b = angio_a.geometry, angio_b.geometry
     try:
+        if pose is not None:
+            return trace_in_3d((angio_a, angio_b), (seg.a, seg.b), vesselness, view_a, pose[0],
+                               (options.intensity_a, options.intensity_b), pose[1]).traced
         return trace_pair((angio_a, angio_b), (seg.a, seg.b), vesselness,
                            (view_a.pixel_mm_at_isocenter, view_b.pixel_mm_at_isocenter),
                            (options.intensity_a, options.intensity_b))

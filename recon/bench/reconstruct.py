@@ -201,7 +201,7 @@ def _case_row(case: PhantomCase, rec, wall_ms: float) -> dict:
 
 
 def run(cases: int | None = None, seed: int = 0, suite: str = "regular",
-        jitter: int = 0, workers: int | None = None) -> dict:
+        jitter: int = 0, workers: int | None = None, tracer: str = "2d") -> dict:
     """Run the end-to-end benchmark on ``cases`` phantom cases; medians and rows.
 
     ``cases`` None means :data:`CASES`; case k is preset ``PRESET_CYCLE[k % 4]``
@@ -210,14 +210,16 @@ def run(cases: int | None = None, seed: int = 0, suite: str = "regular",
     that many extra runs per case with jittered clicks, reported under
     "stability". ``workers``: the regular suite's cases run as tasks on a
     local Dask cluster of that many processes (the engine of `coronary3d
-    batch`); None runs them one after another in this process.
+    batch`); None runs them one after another in this process. ``tracer``: the
+    pipeline's tracer ("2d" or "3d", :data:`recon.pipeline.TRACER_CHOICES`).
     """
     check_suite(suite)
     if jitter < 0:
         raise ValueError(f"jitter must be >= 0, got {jitter}")
     if suite == "varied":
-        return _run_varied(VARIED_CASES_PER_CHAIN if cases is None else cases, seed, jitter)
-    result = _run_regular(cases, seed, workers)
+        return _run_varied(VARIED_CASES_PER_CHAIN if cases is None else cases, seed, jitter,
+                           tracer)
+    result = _run_regular(cases, seed, workers, tracer)
     if jitter:
         cases = CASES if cases is None else cases
         jobs = [(("regular", PRESET_CYCLE[k % len(PRESET_CYCLE)], seed + k), jitter)
@@ -227,20 +229,22 @@ def run(cases: int | None = None, seed: int = 0, suite: str = "regular",
     return result
 
 
-def _regular_case(job: tuple[str, int]) -> tuple[dict | None, dict | None]:
+def _regular_case(job: tuple[str, int, str]) -> tuple[dict | None, dict | None]:
     """One regular-suite case: (row, None), or (None, failure) (runs in a worker)."""
-    preset, case_seed = job
+    preset, case_seed, tracer = job
     case = make_phantom(preset, case_seed, stenosis_pct=STENOSIS_PCT)
     try:
-        return evaluate_case(case, ReconstructionOptions(self_calibration=SELF_CALIBRATION)), None
+        return evaluate_case(case, ReconstructionOptions(self_calibration=SELF_CALIBRATION,
+                                                         tracer=tracer)), None
     except ValueError as err:  # a failed case is a result, not a crash of the bench
         return None, {"preset": preset, "seed": case_seed, "error": str(err)}
 
 
-def _run_regular(cases: int | None, seed: int, workers: int | None = None) -> dict:
+def _run_regular(cases: int | None, seed: int, workers: int | None = None,
+                 tracer: str = "2d") -> dict:
     cases = CASES if cases is None else cases
     self_calibration = SELF_CALIBRATION
-    jobs = [(PRESET_CYCLE[k % len(PRESET_CYCLE)], seed + k) for k in range(cases)]
+    jobs = [(PRESET_CYCLE[k % len(PRESET_CYCLE)], seed + k, tracer) for k in range(cases)]
     t0 = time.perf_counter()
     if workers is None:
         outcomes = [_regular_case(job) for job in jobs]
@@ -263,6 +267,7 @@ def _run_regular(cases: int | None, seed: int, workers: int | None = None) -> di
         "cases": len(rows),
         "failures": failures,
         "self_calibration": self_calibration,
+        "tracer": tracer,
         "centerline_3d_rms_mm": med("centerline_3d_rms_mm"),
         "centerline_3d_rms_scale_free_mm": med("centerline_3d_rms_scale_free_mm"),
         "abs_mld_error_mm": med("mld_error_mm", absolute=True),
@@ -363,8 +368,9 @@ def _one_line(err: BaseException) -> str:
 
 def _case_job(job) -> dict:
     """One case: the base run and ``jitter`` runs with jittered clicks (runs in a worker)."""
-    which, jitter = job
-    options = ReconstructionOptions(self_calibration=SELF_CALIBRATION)
+    which, jitter, *more = job
+    options = ReconstructionOptions(self_calibration=SELF_CALIBRATION,
+                                    tracer=more[0] if more else "2d")
     case, key = _make(which)
     out: dict = {"key": key, "row": None, "failure": None, "stability": None}
     try:
@@ -509,12 +515,12 @@ def _figures(rows: list[dict], failures: list[dict]) -> dict:
     }
 
 
-def _run_varied(per_chain: int, seed: int, jitter: int) -> dict:
+def _run_varied(per_chain: int, seed: int, jitter: int, tracer: str = "2d") -> dict:
     from recon.synth.suites import varied_cases
 
     specs = varied_cases(per_chain, seed)
     t0 = time.perf_counter()
-    outs = parallel_map(_case_job, [(("varied", spec), jitter) for spec in specs])
+    outs = parallel_map(_case_job, [(("varied", spec), jitter, tracer) for spec in specs])
     rows = [o["row"] for o in outs if o["row"] is not None]
     failures = [o["failure"] for o in outs if o["failure"] is not None]
 
@@ -529,6 +535,7 @@ def _run_varied(per_chain: int, seed: int, jitter: int) -> dict:
         "cases_per_chain": int(per_chain),
         "seed": int(seed),
         "self_calibration": SELF_CALIBRATION,
+        "tracer": tracer,
         "stenosis_pct": STENOSIS_PCT,
         "chains": group("chain"),
         "overall": _figures(rows, failures),

@@ -21,6 +21,8 @@ _EXPORTS = {
     "refine_with_matches": "recon.pose.calibration",
     "calibrate_with_curves": "recon.pose.calibration_curves",
     "OptimalView": "recon.pose.optimal_view",
+    "calibration_step": "recon.pose.self_calibration",
+    "self_calibrate": "recon.pose.self_calibration",
     "MeasurementIntervals": "recon.pose.uncertainty",
     "measurement_intervals": "recon.pose.uncertainty",
     "observability": "recon.pose.uncertainty",
