@@ -17,6 +17,7 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 
+from recon.cli_inputs import add_ffr_options, ffr_words
 from recon.cli_inputs import number_arg as _number
 from recon.errors import CoronaryError
 from recon.startup import cap_math_threads
@@ -233,7 +234,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--identify", action="store_true",
                    help="put the patient name, ID and study date from the DICOM headers in "
                    "report.pdf")
-    _add_ffr_options(p)
+    add_ffr_options(p)
     p.add_argument("--quiet", action="store_true", help="no progress on stderr")
     _add_limit_options(p, "the job")
     _add_geometry_options(p, per_file=True)
@@ -473,7 +474,7 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
             print(
                 f"{name}: length {m.segment_length_mm:.1f} mm, MLD {m.mld_mm:.2f} mm, "
                 f"diameter stenosis {m.diameter_stenosis_pct:.0f} %, "
-                f"lesion {m.lesion_length_mm:.1f} mm{_ffr_words(part)}",
+                f"lesion {m.lesion_length_mm:.1f} mm{ffr_words(part)}",
                 file=sys.stderr,
             )
         for bif in getattr(rec, "bifurcations", ()):
@@ -483,41 +484,6 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
     for path in written:
         print(path)
     return 0
-
-
-def _ffr_words(rec) -> str:
-    """", FFR 0.82 (95 % 0.78-0.86; model estimate)" for the summary line ("" without one)."""
-    ffr = getattr(rec, "ffr", None)
-    if ffr is None:
-        return ""
-    ci = f"95 % {ffr.ci95[0]:.2f}-{ffr.ci95[1]:.2f}; " if ffr.ci95 is not None else ""
-    return f", FFR {ffr.distal:.2f} ({ci}model estimate for research)"
-
-
-def _add_ffr_options(p: argparse.ArgumentParser) -> None:
-    """The FFR model's options (recon.lumen.ffr; a model estimate for research)."""
-    from recon.lumen.ffr import (
-        PRESSURE_RANGE_MMHG,
-        SPLIT_EXPONENT_RANGE,
-        VELOCITY_RANGE_M_S,
-        FFRModel,
-    )
-
-    g = p.add_argument_group("FFR model (a model estimate for research, not validated against "
-                             "a pressure wire; docs/ffr.md)")
-    g.add_argument("--aortic-pressure", type=_number(float, *PRESSURE_RANGE_MMHG),
-                   default=FFRModel.aortic_pressure_mmhg, metavar="MMHG",
-                   help="mean aortic pressure driving the hyperemic flow, mmHg (default "
-                   f"{FFRModel.aortic_pressure_mmhg:g})")
-    g.add_argument("--ffr-velocity", type=_number(float, *VELOCITY_RANGE_M_S),
-                   default=FFRModel.velocity_m_s, metavar="M_S",
-                   help="hyperemic mean velocity of a healthy vessel of the proximal "
-                   f"reference area, m/s (default {FFRModel.velocity_m_s:g}); sets the "
-                   "distal resistance")
-    g.add_argument("--ffr-split-exponent", type=_number(float, *SPLIT_EXPONENT_RANGE),
-                   default=FFRModel.split_exponent, metavar="K",
-                   help="a bifurcation splits the flow by diameter^K (default 7/3, Huo and "
-                   "Kassab; 3 is Murray's law)")
 
 
 def _add_limit_options(p: argparse.ArgumentParser, who: str) -> None:

@@ -1,5 +1,6 @@
 """What the command line reads: finite numbers in range (every numeric option), the files
-no output of `coronary3d reconstruct` may replace, and its --segment."""
+no output of `coronary3d reconstruct` may replace, its --segment, and the FFR model's
+options (with the FFR's words in its summary line)."""
 
 from __future__ import annotations
 
@@ -8,7 +9,8 @@ import math
 import os
 from pathlib import Path
 
-__all__ = ["number_arg", "segment_choice", "file_bytes", "input_files"]
+__all__ = ["number_arg", "segment_choice", "file_bytes", "input_files", "add_ffr_options",
+           "ffr_words"]
 
 
 def segment_choice(text: str | None, seeds, seeds_path: str) -> int | None:
@@ -78,3 +80,38 @@ def number_arg(kind: type, low: float | None = None, high: float | None = None,
 
     parse.__name__ = kind.__name__
     return parse
+
+
+def ffr_words(rec) -> str:
+    """", FFR 0.82 (95 % 0.78-0.86; model estimate)" for the summary line ("" without one)."""
+    ffr = getattr(rec, "ffr", None)
+    if ffr is None:
+        return ""
+    ci = f"95 % {ffr.ci95[0]:.2f}-{ffr.ci95[1]:.2f}; " if ffr.ci95 is not None else ""
+    return f", FFR {ffr.distal:.2f} ({ci}model estimate for research)"
+
+
+def add_ffr_options(p: argparse.ArgumentParser) -> None:
+    """The FFR model's options (recon.lumen.ffr; a model estimate for research)."""
+    from recon.lumen.ffr import (
+        PRESSURE_RANGE_MMHG,
+        SPLIT_EXPONENT_RANGE,
+        VELOCITY_RANGE_M_S,
+        FFRModel,
+    )
+
+    g = p.add_argument_group("FFR model (a model estimate for research, not validated against "
+                             "a pressure wire; docs/ffr.md)")
+    g.add_argument("--aortic-pressure", type=number_arg(float, *PRESSURE_RANGE_MMHG),
+                   default=FFRModel.aortic_pressure_mmhg, metavar="MMHG",
+                   help="mean aortic pressure driving the hyperemic flow, mmHg (default "
+                   f"{FFRModel.aortic_pressure_mmhg:g})")
+    g.add_argument("--ffr-velocity", type=number_arg(float, *VELOCITY_RANGE_M_S),
+                   default=FFRModel.velocity_m_s, metavar="M_S",
+                   help="hyperemic mean velocity of a healthy vessel of the proximal "
+                   f"reference area, m/s (default {FFRModel.velocity_m_s:g}); sets the "
+                   "distal resistance")
+    g.add_argument("--ffr-split-exponent", type=number_arg(float, *SPLIT_EXPONENT_RANGE),
+                   default=FFRModel.split_exponent, metavar="K",
+                   help="a bifurcation splits the flow by diameter^K (default 7/3, Huo and "
+                   "Kassab; 3 is Murray's law)")
