@@ -111,6 +111,7 @@ class ViewerApp(RunCommands):
         self.shown_branch = 0  # index in its branches of the one the results panel shows
         self.calibration: CalibrationResult | None = None
         self.calibration_seeds: Seeds | None = None  # the marks it is of
+        self.run_angios: tuple[Angiogram, Angiogram] | None = None  # the reconstruction's
         self._shown_stale = False
         self.progress_log: list[tuple[str, float]] = []
         self._tmpdir = tempfile.TemporaryDirectory(prefix="coronary3d-viewer-")
@@ -245,7 +246,7 @@ class ViewerApp(RunCommands):
         with self._lock:
             self.views = {"a": View("a", angio_a, name_a), "b": View("b", angio_b, name_b)}
             self.state = MarkState(angio_a.geometry, angio_b.geometry, snapper=self._snap)
-            self.reconstruction = None
+            self.reconstruction, self.run_angios = None, None
             self.calibration, self.calibration_seeds = None, None
             self.model = None
             if seeds is not None:
@@ -394,6 +395,7 @@ class ViewerApp(RunCommands):
             v.vesselness = None
             scene.update_image(v)
             self.panels.show_info(self.views)
+            self._show_staleness()  # results of another frame are out of date
         threading.Thread(target=self._warm_vesselness, args=(v,), daemon=True).start()
 
     def set_intensity(self, view: str, choice: str) -> None:

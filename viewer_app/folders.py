@@ -18,6 +18,7 @@ import numpy as np
 import viser
 
 from recon.io import MESH_FORMATS
+from recon.io.outputs import REPORT_PDF_NAME, SR_NAME
 from recon.trace.intensity import INTENSITY_CHOICES
 from viewer_app.commands import PageCommands
 from viewer_app.marks import MODE_LABELS, MODES
@@ -160,6 +161,8 @@ class ResultsPanel:
 
 @dataclass(frozen=True)
 class ExportPanel:
+    report_pdf: viser.GuiButtonHandle  # the whole reconstruction's report (PDF)
+    report_sr: viser.GuiButtonHandle  # ... and its DICOM SR
     mesh_format: viser.GuiDropdownHandle
     mesh: viser.GuiButtonHandle
     centerline_csv: viser.GuiButtonHandle
@@ -476,6 +479,11 @@ def results_folder(gui: viser.GuiApi, app: PageCommands, refreshing: Refreshing)
 
 def export_folder(gui: viser.GuiApi, app: PageCommands) -> ExportPanel:
     with gui.add_folder("Export"):
+        gui.add_markdown("The report of the whole reconstruction (every segment, lesion and "
+                         "bifurcation, with 95 % intervals), as `coronary3d reconstruct "
+                         "--report --sr` writes it:")
+        report_pdf = _download_button(gui, app, "Download report (PDF)", REPORT_PDF_NAME)
+        report_sr = _download_button(gui, app, "Download DICOM SR", SR_NAME)
         mesh_format = gui.add_dropdown("Mesh format", list(MESH_FORMATS))
         mesh = gui.add_button("Download mesh", icon=viser.Icon.DOWNLOAD)
 
@@ -487,7 +495,8 @@ def export_folder(gui: viser.GuiApi, app: PageCommands) -> ExportPanel:
             _download_button(gui, app, f"Download {kind}", kind)
             for kind in ("centerline.csv", "centerline.vtp", "report.json", "seeds.json")
         ]
-    return ExportPanel(mesh_format=mesh_format, mesh=mesh, centerline_csv=buttons[0],
+    return ExportPanel(report_pdf=report_pdf, report_sr=report_sr, mesh_format=mesh_format,
+                       mesh=mesh, centerline_csv=buttons[0],
                        centerline_vtp=buttons[1], report_json=buttons[2], seeds_json=buttons[3])
 
 

@@ -24,6 +24,7 @@ if TYPE_CHECKING:
     from recon.pipeline import Reconstruction
     from recon.pose.calibration import CalibrationResult
     from recon.seeds import Seeds
+    from recon.types import Angiogram
     from viewer_app.commands import Guard, Notify
     from viewer_app.panels import Panels
     from viewer_app.scene import ModelNodes, View
@@ -46,6 +47,7 @@ class RunCommands:
     reconstruction: Result | None
     calibration: CalibrationResult | None
     calibration_seeds: Seeds | None  # the marks the calibration shown is of
+    run_angios: tuple[Angiogram, Angiogram] | None  # the frames the reconstruction is of
     _shown_stale: bool  # whether the page marks the results as out of date
     model: ModelNodes | None
     lesion: dict[str, float] | None
@@ -114,6 +116,7 @@ class RunCommands:
             with self._lock:
                 seeds, segment = tree_view.seeds_for_run(self.state)
                 view_a, view_b = self.views["a"], self.views["b"]
+                angios = (view_a.angio, view_b.angio)  # the frames this run is of
             try:
                 rec = tree_view.run_reconstruction(view_a, view_b, seeds, segment,
                                                    self.intensity, self.limits, progress)
@@ -122,7 +125,7 @@ class RunCommands:
                     self._drop_results(keep_calibration=True)
                 raise
             with self._lock:
-                self.reconstruction = rec
+                self.reconstruction, self.run_angios = rec, angios
                 self.calibration, self.calibration_seeds = rec.calibration, rec.seeds
                 self.state.set_calibrated_b(tree_view.branches_of(rec)[0].view_b)
                 self.state.select(None)  # no guide line across the results
@@ -165,7 +168,7 @@ class RunCommands:
         view B back to its header geometry) unless ``keep_calibration`` and it is of the
         marks shown. After Clear marks and after a failed Reconstruct."""
         current = keep_calibration and not self._calibration_stale()
-        self.reconstruction = None
+        self.reconstruction, self.run_angios = None, None
         self._clear_results()
         if current and self.calibration is not None:
             self.panels.show_calibration(self.calibration)
@@ -184,8 +187,9 @@ class RunCommands:
         changed after them (in the panels, over the images and beside the model), or
         remove the marking when they are of the marks shown again (an Undo)."""
         rec = self.reconstruction
-        stale = rec is not None and tree_view.marks_key(rec.seeds) != tree_view.marks_key(
-            self.state.to_seeds())
+        stale = rec is not None and (tree_view.marks_key(rec.seeds) != tree_view.marks_key(
+            self.state.to_seeds()) or self.run_angios != (self.views["a"].angio,
+                                                          self.views["b"].angio))
         self.panels.show_stale(stale, self._calibration_stale())
         if stale != self._shown_stale:
             tree_view.draw_out_of_date(self.server.scene, self.views, self.model, stale)
@@ -240,8 +244,9 @@ class RunCommands:
 
     # ================================================================ export
     def export(self, kind: str) -> bytes:
-        """Bytes of an output (:func:`viewer_app.exports.export_bytes`)."""
-        return export_bytes(kind, self.reconstruction, self.seeds())
+        """Bytes of an output (:func:`viewer_app.exports.export_bytes`) of the
+        reconstruction shown, whose inputs are the angiograms it was made from."""
+        return export_bytes(kind, self.reconstruction, self.seeds(), self.run_angios)
 
     def download(self, kind: str, client: object | None = None) -> None:
         """Send an export to the browser (a file download)."""

@@ -261,3 +261,81 @@ def test_the_inputs_warnings_are_on_the_page(
         finally:
             b.close()
             app.stop()
+
+
+def _download(b: Browser, button: str, to: Path) -> Path:
+    with b.page.expect_download(timeout=120_000) as info:
+        b.page.get_by_role("button", name=button, exact=True).click()
+    info.value.save_as(to)
+    return to
+
+
+def test_the_report_pdf_and_sr_of_the_whole_tree_download_from_the_page(
+    tmp_path: Path, artifacts_dir: Path
+) -> None:
+    """Issue 46 item 7 with the mouse: the demo tree (LAD with its side branch D1)
+    reconstructed, then "Download report (PDF)" and "Download DICOM SR" pressed; the PDF
+    (read back with pypdf) and the SR (highdicom and dcmtk's dsrdump) hold every
+    segment with its 95 % intervals, report.json's figures."""
+    import shutil
+    import subprocess
+    from dataclasses import replace
+
+    import highdicom as hd
+    import pypdf
+
+    from recon.io import demo_paths, save_seeds
+    from recon.seeds import Seeds
+    from recon.synth import make_phantom
+    from recon.synth.tree_case import tree_seeds
+
+    sync_api = pytest.importorskip("playwright.sync_api", reason="playwright is not installed")
+    seeds, _, _ = tree_seeds(np.random.default_rng(1), make_phantom("static", 7, render=False))
+    main, side = seeds.segments
+    named = Seeds(segments=(replace(main, name="LAD"), replace(side, name="D1", parent="LAD")),
+                  features=seeds.features)
+    save_seeds(named, tmp_path / "tree.json")
+    demo = demo_paths()
+    app = ViewerApp(str(demo["a"]), str(demo["b"]), str(tmp_path / "tree.json"), port=0,
+                    autosave_path=tmp_path / "autosave.json")
+    app.wait_ready()
+    with sync_api.sync_playwright() as pw:
+        b = Browser(pw, tmp_path / "profile", artifacts_dir)
+        try:
+            b.open(app)
+            # before any Reconstruct the page says what to do first
+            b.page.get_by_role("button", name="Download report (PDF)").click()
+            b.page.get_by_text("reconstruct first").first.wait_for(state="visible",
+                                                                   timeout=10_000)
+            assert _reconstructed(b, app, len(app.notifications))
+            rec = app.reconstruction
+            assert len(getattr(rec, "branches", ())) == 2, app.notifications[-3:]
+            report = rec.report()
+            b.page.get_by_role("button", name="Download DICOM SR").scroll_into_view_if_needed()
+            b.shot("answers_11_report_buttons.png")
+            pdf = _download(b, "Download report (PDF)", tmp_path / "report.pdf")
+            sr = _download(b, "Download DICOM SR", tmp_path / "measurements-sr.dcm")
+        finally:
+            b.close()
+            app.stop()
+    text = "\n".join(page.extract_text() for page in pypdf.PdfReader(pdf).pages)
+    (artifacts_dir / "answers_report.txt").write_text(text)
+    for branch in report["branches"]:
+        name, m = branch["inputs"]["segment"], branch["measurements"]
+        assert name in text
+        lo, hi = branch["measurements_ci95"]["mld_mm"]
+        assert f"{m['mld_mm']:.2f}" in text and f"{lo:.2f}" in text and f"{hi:.2f}" in text
+    groups = hd.sr.srread(sr).content.get_image_measurement_groups()
+    names = [g.tracking_identifier for g in groups]
+    assert {"LAD", "D1"} <= set(names), names
+    by_name = {g.tracking_identifier: g for g in groups}
+    for branch in report["branches"]:  # report.json's figures to the digit
+        name = branch["inputs"]["segment"]
+        mld = [m for m in by_name[name].get_measurements() if m.name.value == "397413000"]
+        assert mld and mld[0].value == pytest.approx(branch["measurements"]["mld_mm"],
+                                                     rel=1e-9)
+    if shutil.which("dsrdump"):
+        proc = subprocess.run(["dsrdump", "-Ee", str(sr)], capture_output=True, text=True,
+                              timeout=60)
+        assert proc.returncode == 0 and "E:" not in proc.stderr, proc.stderr
+        assert '"LAD"' in proc.stdout and '"D1"' in proc.stdout
