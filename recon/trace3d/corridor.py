@@ -97,17 +97,27 @@ def snap_ends(vmaps: tuple[VesselnessMap, VesselnessMap], clicks_a_px: FloatArra
 
 
 def clicks_on_path(clicks_px: FloatArray, path_px: FloatArray) -> FloatArray:
-    """Each click (K, 2) moved to the nearest point of the path's image (M, 2), the ends
-    to its ends: the clicks the 2D tracing starts from inside the corridor."""
+    """The clicks (K, 2) the 2D tracing starts from inside the corridor: the end clicks as
+    clicked (the path's image is extended to them), each waypoint moved to the nearest
+    point of the path's image (M, 2), in order."""
+    c = np.asarray(clicks_px, dtype=float).copy()
+    if len(c) > 2:
+        d = np.linalg.norm(c[1:-1, None, :] - path_px[None, :, :], axis=2)
+        at = np.maximum.accumulate(np.argmin(d, axis=1))
+        c[1:-1] = path_px[at]
+    return c
+
+
+def extended(path_px: FloatArray, clicks_px: FloatArray) -> FloatArray:
+    """The path's image (M, 2) extended to the end clicks (the path's ends lie within a few
+    px of them)."""
     c = np.asarray(clicks_px, dtype=float)
-    d = np.linalg.norm(c[:, None, :] - path_px[None, :, :], axis=2)
-    at = np.argmin(d, axis=1)
-    at[0], at[-1] = 0, len(path_px) - 1
-    return path_px[np.maximum.accumulate(at)]
+    return np.vstack([c[:1], path_px, c[-1:]])
 
 
 def corridor_maps(vmaps: tuple[VesselnessMap, VesselnessMap], path: Path3D,
-                  views: tuple[ViewGeometry, ViewGeometry]) -> tuple[VesselnessMap, ...]:
-    """Both views' corridor maps around the path's images."""
-    return tuple(corridor_map(v, path.projected(g)) for v, g in zip(vmaps, views, strict=True))
-
+                  views: tuple[ViewGeometry, ViewGeometry],
+                  clicks_px: tuple[FloatArray, FloatArray]) -> tuple[VesselnessMap, ...]:
+    """Both views' corridor maps around the path's images, extended to the end clicks."""
+    return tuple(corridor_map(v, extended(path.projected(g), c))
+                 for v, g, c in zip(vmaps, views, clicks_px, strict=True))

@@ -65,7 +65,7 @@ def trace_in_3d(
     ev_a, ev_b = (view_evidence(angio.image, vmap, COARSE_MM / px)
                   for angio, vmap, px in zip(angios, vmaps, pixel_mm, strict=True))
     path = trace_path_3d(ev_a, ev_b, view_a, view_b, clicks_px[0], clicks_px[1], tol_px)
-    maps = corridor_maps(vmaps, path, (view_a, view_b))
+    maps = corridor_maps(vmaps, path, (view_a, view_b), clicks_px)
     on_path = (clicks_on_path(clicks_px[0], path.projected(view_a)),
                clicks_on_path(clicks_px[1], path.projected(view_b)))
     traced = trace_pair(angios, on_path, maps, pixel_mm, intensity)
