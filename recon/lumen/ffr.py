@@ -174,33 +174,57 @@ def _cumtrapz(f: FloatArray, s: FloatArray) -> FloatArray:
     return np.concatenate([[0.0], np.cumsum(0.5 * (f[1:] + f[:-1]) * np.diff(s))])
 
 
-def _narrowings(area: FloatArray, reference: FloatArray) -> list[tuple[int, int, int]]:
-    """(first, throat, last) indices of each maximal run where area < reference."""
+def _runs(idx_first: NDArray[np.int64], idx_last: NDArray[np.int64]) -> tuple[
+        NDArray[np.int64], NDArray[np.int64]]:
+    """The indices of every run [first_j, last_j] laid end to end, and where each run
+    starts in that list."""
+    lengths = idx_last - idx_first + 1
+    offsets = np.cumsum(lengths) - lengths
+    idx = np.arange(int(lengths.sum())) - np.repeat(offsets, lengths) + np.repeat(idx_first,
+                                                                                   lengths)
+    return idx, offsets
+
+
+def _narrowings(area: FloatArray, reference: FloatArray
+                ) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64]]:
+    """(first, throat, last) index arrays (J,) of the maximal runs where area < reference
+    (the throat: the run's least area, its first point when tied)."""
     below = (area < reference).astype(np.int8)
     edges = np.diff(np.concatenate([[0], below, [0]]))
-    starts, stops = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
-    return [(int(i), int(i + np.argmin(area[i:j])), int(j - 1))
-            for i, j in zip(starts, stops, strict=True)]
+    first, last = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1) - 1
+    if first.size == 0:
+        return first, first, first
+    idx, offsets = _runs(first, last)
+    least = np.minimum.reduceat(area[idx], offsets)
+    lengths = last - first + 1
+    at_least = np.where(area[idx] == np.repeat(least, lengths), idx, len(area))
+    return first, np.minimum.reduceat(at_least, offsets), last
 
 
 def loss_coefficients(lumen: Lumen, model: FFRModel) -> tuple[FloatArray, FloatArray]:
     """Cumulative loss coefficients along the lumen: (a (M,) mmHg s / mL, b (M,)
     mmHg s^2 / mL^2), so that the pressure lost from the first point to point i at flow
     Q (mL/s) is a[i] Q + b[i] Q^2 (module docstring)."""
-    s_m = lumen.s_mm * 1e-3
+    s = lumen.s_mm
     area_m2 = np.maximum(lumen.area_mm2, 1e-9) * 1e-6
     per_m = 8.0 * np.pi * model.viscosity_pa_s / area_m2**2  # Pa s / m^3 per m
-    a = _cumtrapz(per_m, s_m) * 1e-6 / MMHG_PA  # Pa s / m^3 -> mmHg s / mL
+    a = _cumtrapz(per_m, s * 1e-3) * 1e-6 / MMHG_PA  # Pa s / m^3 -> mmHg s / mL
+    _, throat, last = _narrowings(lumen.area_mm2, lumen.reference_area_mm2)
     b = np.zeros_like(a)
-    for _first, throat, last in _narrowings(lumen.area_mm2, lumen.reference_area_mm2):
-        a0 = lumen.reference_area_mm2[throat] * 1e-6
-        amin = area_m2[throat]
-        coeff = 0.5 * model.kt * model.density_kg_m3 * (a0 / amin - 1.0) ** 2 / a0**2
-        coeff *= 1e-12 / MMHG_PA  # Pa / (m^3/s)^2 -> mmHg / (mL/s)^2
-        s0, s1 = lumen.s_mm[throat], lumen.s_mm[last]
-        ramp = np.clip((lumen.s_mm - s0) / (s1 - s0), 0.0, 1.0) if s1 > s0 else \
-            (lumen.s_mm >= s0).astype(float)
-        b += coeff * ramp
+    if throat.size == 0:
+        return a, b
+    a0 = lumen.reference_area_mm2[throat] * 1e-6
+    coeff = 0.5 * model.kt * model.density_kg_m3 * (a0 / area_m2[throat] - 1.0) ** 2 / a0**2
+    coeff *= 1e-12 / MMHG_PA  # Pa / (m^3/s)^2 -> mmHg / (mL/s)^2
+    # each narrowing's loss: complete past its last point, a linear ramp from its throat
+    done = np.zeros(len(s) + 1)
+    np.add.at(done, last + 1, coeff)
+    b += np.cumsum(done)[:-1]
+    idx, _ = _runs(throat, last)
+    n = last - throat + 1
+    s0, s1 = np.repeat(s[throat], n), np.repeat(s[last], n)
+    frac = np.where(s1 > s0, (s[idx] - s0) / np.where(s1 > s0, s1 - s0, 1.0), 1.0)
+    b[idx] += np.repeat(coeff, n) * frac
     return a, b
 
 

@@ -197,3 +197,26 @@ def test_the_distal_resistance_follows_the_aortic_pressure():
     narrowed = cosine_narrowing(60.0)
     assert tree_ffr([FFRVessel(narrowed)], FFRModel(aortic_pressure_mmhg=70.0))[0].distal < \
         tree_ffr([FFRVessel(narrowed)], MODEL)[0].distal - 0.03
+
+
+def test_the_separation_loss_of_many_narrowings_is_their_sum():
+    """A noisy lumen (many short runs below its reference): b, vectorised, equals the sum
+    over the narrowings written out one by one."""
+    rng = np.random.default_rng(5)
+    s = np.arange(0.0, 60.0, 0.25)
+    ref = np.pi * 1.4**2 * np.ones_like(s)
+    area = ref * (1.0 + 0.06 * rng.standard_normal(len(s)))
+    area[100:130] *= 0.4
+    _, b = loss_coefficients(Lumen(s, area, ref), MODEL)
+    expected = np.zeros_like(s)
+    below = np.flatnonzero(area < ref)
+    runs = np.split(below, np.flatnonzero(np.diff(below) > 1) + 1)
+    assert len(runs) > 10
+    for run in runs:
+        throat, last = run[np.argmin(area[run])], run[-1]
+        a0, amin = ref[throat] * 1e-6, area[throat] * 1e-6
+        c = 0.5 * 1.52 * 1060.0 * (a0 / amin - 1.0) ** 2 / a0**2 * 1e-12 / MMHG_PA
+        ramp = np.clip((s - s[throat]) / (s[last] - s[throat]), 0, 1) if last > throat else \
+            (s >= s[throat]).astype(float)
+        expected += c * ramp
+    np.testing.assert_allclose(b, expected, rtol=1e-12, atol=1e-15)
