@@ -93,6 +93,12 @@ def test_outputs_carry_every_branch(tree_case, tmp_path):
     for entry, branch in zip(report["branches"], rec.branches, strict=True):
         assert entry["measurements"]["ffr"] == entry["ffr"]["distal"] == round(branch.ffr.distal, 4)
         assert len(entry["ffr"]["s_mm"]) == len(entry["ffr"]["ffr"]) == len(branch.profile.s_mm)
+        parent = tc.seeds.segments[branch.options.segment].parent
+        if parent is not None:  # a branch's pullback starts at its parent's pressure there
+            up = rec.branches[tc.seeds.segment_index(parent)]
+            join = nearest_on_polyline(up.centerline_3d.X_world, branch.centerline_3d.X_world[0])
+            assert branch.ffr.ffr[0] == pytest.approx(np.interp(join[1], up.ffr.s_mm, up.ffr.ffr),
+                                                      abs=1e-3)
     assert report["tree"]["mesh"]["components"] == 1
     assert {"bifurcation_angle_deg", "medina", "side_branch"} <= set(report["bifurcations"][0])
     lines = files["centerline.csv"].decode().splitlines()
