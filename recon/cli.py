@@ -226,7 +226,8 @@ def build_parser() -> argparse.ArgumentParser:
         "measurements in the inputs' patient and study (DICOM inputs only)",
     )
     p.add_argument("--report", action="store_true",
-                   help="also write report.pdf, a one-page report beside report.json (no "
+                   help="also write report.pdf, the report of every segment beside "
+                   "report.json (no "
                    "patient name, ID or date unless --identify)")
     p.add_argument("--allow-different-patients", action="store_true",
                    help="go on, with a warning, when files A and B name different patients "
@@ -460,8 +461,8 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
         if args.report:
             from recon.io.report_pdf import report_pdf_bytes
 
-            first = parts[0][1]  # the report's page is the first segment's, as report.json
-            extra["report.pdf"] = report_pdf_bytes(first, angio_a.image, angio_b.image,
+            # the whole reconstruction: an overview, then a page per segment
+            extra["report.pdf"] = report_pdf_bytes(rec, angio_a.image, angio_b.image,
                                                    identify=args.identify)
     written = write_outputs(rec, Path(args.out), formats=formats, sr_sources=sr_sources,
                             inputs=inputs, extra=extra)

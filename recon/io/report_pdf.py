@@ -1,16 +1,30 @@
-"""The one-page report (report.pdf) of a reconstruction, drawn with matplotlib.
+"""The report (report.pdf) of a whole reconstruction, drawn with matplotlib.
 
-Both angiograms with the traced centerline, the MLD and the lesion ends; a 3D
-snapshot of the centerline coloured by lumen diameter (seen as in view A); the
-diameter profile with the reference and the lesion; the measurements in clinical
-words; the best next view; the files' names and acquisition angles, the software
-version and "research use only". No patient name, ID or date unless ``identify``
-(they are then read from the DICOM headers).
+Page 1, the overview: the files' names and acquisition angles, the software version
+and "research use only"; both angiograms with every segment's trace (one colour per
+segment) and each lesion's MLD numbered ("LAD 1"); a 3D snapshot of every centerline
+coloured by lumen diameter (seen as in view A); a table of every segment (length,
+MLD, % diameter stenosis, lesion length, each with its 95 % interval, and its
+lesions); the bifurcations (Medina class, angles, the three segments' % diameter
+stenosis); the best next view; the warnings.
+
+Then one page per segment: its diameter profile (measured, smoothed, the reference,
+the diameter's 95 % band) with bands for each lesion (numbered), a narrowing not
+confirmed, the zones at the clicked ends or the ostium, where a side branch leaves
+it and where one view's radius was replaced because another vessel overlaps it; its
+figures with their 95 % intervals; its lesions, each with MLD, % diameter stenosis,
+length and site, and their intervals; and whether the most severe lesion stands out
+(:mod:`recon.lumen.lesions`).
+
+No patient name, ID or date unless ``identify`` (then read from the DICOM headers).
+:func:`write_report_pdf` is the page's call; the command line's ``--report`` renders
+:func:`report_pdf_bytes` into the output set.
 """
 
 from __future__ import annotations
 
 import io
+import os
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -21,10 +35,17 @@ from recon import __version__
 
 if TYPE_CHECKING:
     from recon.pipeline import Reconstruction
+    from recon.tree import TreeReconstruction
 
-__all__ = ["report_figure", "report_pdf_bytes"]
+__all__ = ["report_figure", "report_pages", "report_pdf_bytes", "write_report_pdf",
+           "side_branch_bands"]
 
 A4_IN = (8.27, 11.69)
+#: One colour per segment (the seeds' order), as matplotlib's tab10.
+SEGMENT_COLOURS = ("tab:orange", "tab:blue", "tab:green", "tab:red", "tab:purple",
+                   "tab:brown", "tab:pink", "tab:olive", "tab:cyan", "tab:gray")
+_CI_KEYS = {"mld_mm": "MLD", "diameter_stenosis_pct": "%DS",
+            "lesion_length_mm": "lesion length", "segment_length_mm": "length"}
 
 
 def _angles(alpha_deg: float, beta_deg: float) -> str:
@@ -45,129 +66,429 @@ def _identity(path: str) -> str | None:
     return ", ".join(p for p in parts if p) or None
 
 
-def report_figure(rec: Reconstruction, image_a: NDArray, image_b: NDArray,
+def _segments(result) -> list[Reconstruction]:
+    """Every segment reconstructed: a tree's branches, else the one reconstruction."""
+    return list(getattr(result, "branches", None) or [result])
+
+
+def _name(rec: Reconstruction) -> str:
+    return rec.seeds.segments[rec.options.segment].name
+
+
+def _with_ci(value: float, ci: tuple[float, float] | None, fmt: str, unit: str) -> str:
+    """"1.43 mm (1.27-1.60)": a figure and its 95 % interval."""
+    text = f"{value:{fmt}} {unit}".rstrip()
+    if ci is not None:
+        text += f" ({ci[0]:{fmt}}–{ci[1]:{fmt}})"
+    return text
+
+
+def _ci(rec: Reconstruction, key: str) -> tuple[float, float] | None:
+    iv = getattr(rec, "intervals", None)
+    return None if iv is None else iv.ci95.get(key)
+
+
+def side_branch_bands(result, rec: Reconstruction) -> list[dict]:
+    """Where side branches leave segment ``rec`` (arc length along it): the tree's
+    bifurcations whose parent it is (from J - r_J to J + r_J, the parent's stretch
+    that the branch's ostium widens, :mod:`recon.lumen.bifurcation`); without them, the
+    clicked features that lie on the segment (from s - D to s + 1.5 D, D the
+    reference diameter there, as the viewer's chart draws them). Dicts ``name``,
+    ``start_mm``, ``end_mm``."""
+    name = _name(rec)
+    bifs = [b for b in getattr(result, "bifurcations", ()) if b.parent == name]
+    if bifs:
+        return [{"name": b.branch, "start_mm": float(b.proximal_main.end_s_mm),
+                 "end_mm": float(b.distal_main.start_s_mm)} for b in bifs]
+    features = getattr(rec.seeds, "features", ())
+    if not features or getattr(result, "bifurcations", ()):
+        return []
+    from recon.geometry import triangulate
+
+    c = rec.centerline_3d
+    s = np.asarray(c.s_mm, dtype=float)
+    ref = np.interp(s, rec.profile.s_mm, rec.profile.reference_diameter_mm)
+    X = triangulate(np.array([f.a_px for f in features], float),
+                    np.array([f.b_px for f in features], float), rec.view_a, rec.view_b)
+    dist = np.linalg.norm(np.asarray(c.X_world)[None, :, :] - X[:, None, :], axis=-1)
+    out = []
+    for k, (f, i) in enumerate(zip(features, np.argmin(dist, axis=1), strict=True)):
+        d_ref = float(ref[i])
+        on_vessel = dist[k, i] <= max(1.5, 2.0 * float(c.radius_mm[i]))
+        if on_vessel and s[0] + d_ref <= s[i] <= s[-1] - d_ref:
+            out.append({"name": f.name or "feature", "start_mm": float(max(s[i] - d_ref, s[0])),
+                        "end_mm": float(min(s[i] + 1.5 * d_ref, s[-1]))})
+    return out
+
+
+# ------------------------------------------------------------------ page 1
+def report_figure(result, image_a: NDArray | None, image_b: NDArray | None,
                   identify: bool = False) -> object:
-    """The report page as a matplotlib Figure (A4 portrait)."""
+    """The overview page (A4 portrait) as a matplotlib Figure (module docstring)."""
     from matplotlib.figure import Figure
 
-    m = rec.measurements
-    prof = rec.profile
-    X = np.asarray(rec.centerline_3d.X_world, float)
-    s = np.asarray(rec.centerline_3d.s_mm, float)
-    marks = {"MLD": m.mld_s_mm}
-    if m.has_lesion:
-        marks.update({"lesion start": m.lesion_start_s_mm, "lesion end": m.lesion_end_s_mm})
-    P = {n: np.array([np.interp(v, s, X[:, k]) for k in range(3)]) for n, v in marks.items()}
-
+    parts = _segments(result)
+    first = parts[0]
     fig = Figure(figsize=A4_IN)
     fig.text(0.05, 0.975, "coronary3d — 3D quantitative coronary analysis", fontsize=14,
              weight="bold", va="top")
     fig.text(0.05, 0.952, f"software {__version__} · RESEARCH USE ONLY — not for diagnosis",
              fontsize=9, color="firebrick", va="top")
     lines = []
-    for key, path, view in (("A", rec.path_a, rec.view_a), ("B", rec.path_b, rec.view_b)):
+    for key, path, view in (("A", first.path_a, first.view_a), ("B", first.path_b,
+                                                                 first.view_b)):
         line = f"{key}: {Path(path).name}, {_angles(view.alpha_deg, view.beta_deg)}"
         if identify:
             who = _identity(path)
             line += f" — {who}" if who else ""
         lines.append(line)
     fig.text(0.05, 0.93, "\n".join(lines), fontsize=8.5, va="top")
-
-    for i, (key, image, cl, geom) in enumerate((
-            ("A", image_a, rec.centerline_a, rec.view_a),
-            ("B", image_b, rec.centerline_b, rec.view_b))):
-        ax = fig.add_axes((0.05 + i * 0.47, 0.585, 0.43, 0.285))
-        lo, hi = np.percentile(image, [0.5, 99.5])
-        ax.imshow(image, cmap="gray", vmin=lo, vmax=hi)
-        ax.plot(cl.points_px[:, 0], cl.points_px[:, 1], color="orange", lw=1.0)
-        for name, Xp in P.items():
-            c, r = geom.project(Xp[None])[0]
-            ax.plot(c, r, "D", ms=5, color="magenta" if name == "MLD" else "royalblue")
-        c, r = geom.project(P["MLD"][None])[0]
-        ax.annotate("MLD", (c, r), xytext=(-28, -4), textcoords="offset points",
-                    color="magenta", fontsize=8)
-        ax.set_title(f"{key}: {_angles(geom.alpha_deg, geom.beta_deg)}", fontsize=9)
-        ax.set_axis_off()
-
-    # 3D snapshot: the centerline coloured by diameter, in view A's image axes.
-    ax3 = fig.add_axes((0.05, 0.33, 0.40, 0.215))
-    V = X @ rec.view_a.R_view_from_world.T
-    d = np.interp(s, prof.s_mm, prof.diameter_smooth_mm)
-    sc = ax3.scatter(V[:, 0], V[:, 1], c=d, cmap="RdYlGn", s=6, vmin=0.5 * np.max(d),
-                     vmax=np.max(d))
-    Vm = P["MLD"] @ rec.view_a.R_view_from_world.T
-    ax3.plot(Vm[0], Vm[1], "o", ms=9, mfc="none", mec="magenta", mew=2)
-    ax3.invert_yaxis()
-    ax3.set_aspect("equal")
-    ax3.set_title("3D centerline, coloured by diameter (seen as in A)", fontsize=9)
-    ax3.set_xticks([])
-    ax3.set_yticks([])
-    cb = fig.colorbar(sc, ax=ax3, fraction=0.05)
-    cb.ax.set_title("mm", fontsize=7)
-
-    axp = fig.add_axes((0.60, 0.36, 0.36, 0.20))
-    axp.plot(prof.s_mm, prof.diameter_mm, color="lightsteelblue", lw=0.8, label="measured")
-    axp.plot(prof.s_mm, prof.diameter_smooth_mm, color="navy", lw=1.5, label="smoothed")
-    axp.plot(prof.s_mm, prof.reference_diameter_mm, color="gray", ls="--", label="reference")
-    if m.has_lesion:
-        axp.axvspan(m.lesion_start_s_mm, m.lesion_end_s_mm, color="mistyrose")
-    axp.plot(m.mld_s_mm, m.mld_mm, "o", color="magenta")
-    axp.set_xlabel("distance from the proximal end (mm)", fontsize=8)
-    axp.set_ylabel("diameter (mm)", fontsize=8)
-    axp.tick_params(labelsize=7)
-    axp.legend(fontsize=7, loc="lower left")
-    axp.set_title("Diameter profile", fontsize=9)
-
-    ref_prox = float(np.interp(m.lesion_start_s_mm, prof.s_mm, prof.reference_diameter_mm))
-    ref_dist = float(np.interp(m.lesion_end_s_mm, prof.s_mm, prof.reference_diameter_mm))
-    rows = [
-        ("Minimal lumen diameter", f"{m.mld_mm:.2f} mm"),
-        ("% diameter stenosis", f"{m.diameter_stenosis_pct:.0f} %"),
-        ("% area stenosis", f"{m.area_stenosis_pct:.0f} %"),
-        ("Minimal lumen area", f"{m.mla_mm2:.2f} mm²"),
-        ("Reference diameter at the MLD", f"{m.reference_diameter_mm:.2f} mm"),
-        ("Proximal / distal reference", f"{ref_prox:.2f} / {ref_dist:.2f} mm"),
-        ("Lesion length", f"{m.lesion_length_mm:.1f} mm"),
-        ("Segment length", f"{m.segment_length_mm:.1f} mm"),
-    ]
-    best = rec.optimal_view
-    if best is not None:
-        fs = best.current_foreshortening_pct
-        rows += [("Foreshortening in A / B", f"{fs['a']:.0f} / {fs['b']:.0f} %"),
-                 ("Best next view (★ on the map)", _angles(*best.angles_deg)),
-                 ("  foreshortening / overlap there",
-                  f"{best.foreshortening_pct:.1f} / {best.overlap_pct:.0f} %")]
-    axt = fig.add_axes((0.05, 0.05, 0.50, 0.24))
-    axt.set_axis_off()
-    table = axt.table(cellText=rows, colWidths=[0.55, 0.45], loc="upper left",
-                      cellLoc="left")
-    table.auto_set_font_size(False)
-    table.set_fontsize(8)
-    table.scale(1.0, 1.3)
-    if best is not None:
-        axm = fig.add_axes((0.62, 0.07, 0.33, 0.19))
-        score = best.foreshortening_map_pct + best.overlap_map_pct
-        a, b = best.alpha_grid_deg, best.beta_grid_deg
-        im = axm.imshow(score, origin="lower", cmap="viridis_r", aspect="auto",
-                        extent=(a[0], a[-1], b[0], b[-1]))
-        axm.plot(*best.angles_deg, "r*", ms=10)
-        axm.set_xlabel("RAO − / LAO + (°)", fontsize=7)
-        axm.set_ylabel("CAU − / CRA + (°)", fontsize=7)
-        axm.tick_params(labelsize=6)
-        axm.set_title("Foreshortening + overlap (%)", fontsize=8)
-        fig.colorbar(im, ax=axm, fraction=0.05)
+    for i, (key, image) in enumerate((("A", image_a), ("B", image_b))):
+        ax = fig.add_axes((0.05 + i * 0.47, 0.62, 0.43, 0.25))
+        _draw_view(ax, parts, key, image)
+    _draw_3d(fig, parts)
+    _draw_best_view(fig, first)
+    _draw_segment_table(fig, parts)
+    _draw_bifurcations(fig, result, top=0.34 - 0.0185 * (len(parts) + 1) - 0.03)
+    warnings = list(getattr(result, "warnings", ()))
+    if warnings:
+        shown = warnings[:4] + ([f"… {len(warnings) - 4} more in report.json"]
+                                if len(warnings) > 4 else [])
+        fig.text(0.05, 0.035, "Warnings:\n" + "\n".join(_wrap(w, 150) for w in shown),
+                 fontsize=6.5, va="bottom", color="darkred")
     return fig
 
 
-def report_pdf_bytes(rec: Reconstruction, image_a: NDArray, image_b: NDArray,
-                     identify: bool = False) -> bytes:
-    """The report as PDF bytes. ``image_a``, ``image_b``: (H, W) the frames used."""
+def _wrap(text: str, width: int) -> str:
+    import textwrap
+
+    return "\n".join(textwrap.wrap(text, width)) or text
+
+
+def _marks(rec: Reconstruction) -> list[tuple[str, NDArray]]:
+    """(label, X (3,)) of each lesion's MLD of a segment ("LAD 1"), or its MLD without one."""
+    c = rec.centerline_3d
+    X, s = np.asarray(c.X_world, float), np.asarray(c.s_mm, float)
+
+    def at(v: float) -> NDArray:
+        return np.array([np.interp(v, s, X[:, k]) for k in range(3)])
+
+    return [(f"{_name(rec)} {les.number}", at(les.narrowing.mld_s_mm))
+            for les in rec.lesions.lesions] or [(f"{_name(rec)} MLD",
+                                                 at(rec.measurements.mld_s_mm))]
+
+
+def _marked(parts: list[Reconstruction]) -> list[Reconstruction]:
+    """The segments whose places are marked on the images: those with a lesion (the first
+    segment, for its MLD, when none has one)."""
+    return [rec for rec in parts if rec.lesions.lesions] or parts[:1]
+
+
+def _draw_view(ax, parts: list[Reconstruction], key: str, image: NDArray | None) -> None:
+    first = parts[0]
+    if image is not None:
+        lo, hi = np.percentile(image, [0.5, 99.5])
+        ax.imshow(image, cmap="gray", vmin=lo, vmax=hi)
+    else:
+        view = first.view_a if key == "A" else first.view_b
+        ax.set_xlim(0, view.cols)
+        ax.set_ylim(view.rows, 0)
+        ax.text(0.5, 0.02, "image not given", transform=ax.transAxes, ha="center",
+                fontsize=7, color="gray")
+    placed: list[tuple[float, float]] = []
+    for k, rec in enumerate(parts):
+        colour = SEGMENT_COLOURS[k % len(SEGMENT_COLOURS)]
+        cl = rec.centerline_a if key == "A" else rec.centerline_b
+        geom = rec.view_a if key == "A" else rec.view_b
+        ax.plot(cl.points_px[:, 0], cl.points_px[:, 1], color=colour, lw=1.0,
+                label=_name(rec))
+        for label, Xp in _marks(rec) if rec in _marked(parts) else ():
+            c, r = geom.project(Xp[None])[0]
+            ax.plot(c, r, "D", ms=4, color="magenta")
+            dy = -10 - 9 * sum(abs(c - pc) < 40 and abs(r - pr) < 15 for pc, pr in placed)
+            placed.append((c, r))
+            ax.annotate(label, (c, r), xytext=(6, dy), textcoords="offset points",
+                        color="magenta", fontsize=6.5,
+                        arrowprops={"arrowstyle": "-", "color": "magenta", "lw": 0.5})
+    view = first.view_a if key == "A" else first.view_b
+    ax.set_title(f"{key}: {_angles(view.alpha_deg, view.beta_deg)}", fontsize=9)
+    ax.legend(fontsize=6, loc="lower right", framealpha=0.6)
+    ax.set_axis_off()
+
+
+def _draw_3d(fig, parts: list[Reconstruction]) -> None:
+    ax3 = fig.add_axes((0.05, 0.40, 0.40, 0.19))
+    R = parts[0].view_a.R_view_from_world
+    d_all = []
+    for rec in parts:
+        s = np.asarray(rec.centerline_3d.s_mm, float)
+        d_all.append(np.interp(s, rec.profile.s_mm, rec.profile.diameter_smooth_mm))
+    vmax = float(max(np.max(d) for d in d_all))
+    sc = None
+    for rec, d in zip(parts, d_all, strict=True):
+        V = np.asarray(rec.centerline_3d.X_world, float) @ R.T
+        sc = ax3.scatter(V[:, 0], V[:, 1], c=d, cmap="RdYlGn", s=4, vmin=0.4 * vmax, vmax=vmax)
+        for label, Xp in _marks(rec) if rec in _marked(parts) else ():
+            Vm = Xp @ R.T
+            ax3.plot(Vm[0], Vm[1], "o", ms=7, mfc="none", mec="magenta", mew=1.5)
+            ax3.annotate(label, (Vm[0], Vm[1]), xytext=(5, 5), textcoords="offset points",
+                         fontsize=6, color="magenta")
+    ax3.invert_yaxis()
+    ax3.set_aspect("equal")
+    ax3.set_title("3D, coloured by diameter (as seen in A)", fontsize=8.5)
+    ax3.set_xticks([])
+    ax3.set_yticks([])
+    cb = fig.colorbar(sc, ax=ax3, fraction=0.05)
+    cb.set_label("diameter (mm)", fontsize=7)
+    cb.ax.tick_params(labelsize=7)
+
+
+def _draw_best_view(fig, rec: Reconstruction) -> None:
+    best = rec.optimal_view
+    axt = fig.add_axes((0.55, 0.53, 0.42, 0.06))
+    axt.set_axis_off()
+    if best is None:
+        return
+    fs = best.current_foreshortening_pct
+    rows = [("Foreshortening in A / B", f"{fs['a']:.0f} / {fs['b']:.0f} %"),
+            ("Best next view", _angles(*best.angles_deg)),
+            ("  foreshortening / overlap there",
+             f"{best.foreshortening_pct:.1f} / {best.overlap_pct:.0f} %")]
+    axt.set_title(f"Best next view for {_name(rec)}", fontsize=8.5, loc="left")
+    table = axt.table(cellText=rows, colWidths=[0.6, 0.4], loc="upper left", cellLoc="left")
+    table.auto_set_font_size(False)
+    table.set_fontsize(7.5)
+    table.scale(1.0, 1.2)
+    axm = fig.add_axes((0.60, 0.38, 0.30, 0.11))
+    score = best.foreshortening_map_pct + best.overlap_map_pct
+    a, b = best.alpha_grid_deg, best.beta_grid_deg
+    im = axm.imshow(score, origin="lower", cmap="viridis_r", aspect="auto",
+                    extent=(a[0], a[-1], b[0], b[-1]))
+    axm.plot(*best.angles_deg, "r*", ms=9)
+    axm.set_xlabel("RAO − / LAO + (°)", fontsize=6.5)
+    axm.set_ylabel("CAU − / CRA + (°)", fontsize=6.5)
+    axm.tick_params(labelsize=6)
+    axm.set_title("Foreshortening + overlap (%), ★ the best view", fontsize=7)
+    fig.colorbar(im, ax=axm, fraction=0.05)
+
+
+def _draw_segment_table(fig, parts: list[Reconstruction]) -> None:
+    """Every segment's figures with their 95 % intervals and its lesions."""
+    ax = fig.add_axes((0.05, 0.22, 0.90, 0.12))
+    ax.set_axis_off()
+    ax.set_title("Segments (95 % intervals in brackets)", fontsize=9, loc="left")
+    header = ["Segment", "Length", "Minimal lumen diameter", "% diameter stenosis",
+              "Lesion length", "Lesions"]
+    rows = []
+    for rec in parts:
+        m = rec.measurements
+        report = rec.lesions
+        lesions = ", ".join(f"{les.number}: {les.narrowing.diameter_stenosis_pct:.0f} % at "
+                            f"{les.narrowing.mld_s_mm:.0f} mm" for les in report.lesions)
+        if report.primary_ambiguous:
+            lesions += " (no single most severe)"
+        rows.append([_name(rec),
+                     _with_ci(m.segment_length_mm, _ci(rec, "segment_length_mm"), ".1f", "mm"),
+                     _with_ci(m.mld_mm, _ci(rec, "mld_mm"), ".2f", "mm"),
+                     _with_ci(m.diameter_stenosis_pct, _ci(rec, "diameter_stenosis_pct"),
+                              ".0f", "%"),
+                     _with_ci(m.lesion_length_mm, _ci(rec, "lesion_length_mm"), ".1f", "mm"),
+                     lesions or ("none" + (" (ostium not confirmed)"
+                                           if report.unsupported else ""))])
+    table = ax.table(cellText=rows, colLabels=header, loc="upper left", cellLoc="left",
+                     colWidths=[0.1, 0.16, 0.2, 0.16, 0.16, 0.22])
+    table.auto_set_font_size(False)
+    table.set_fontsize(6.5)
+    table.scale(1.0, 1.25)
+
+
+def _draw_bifurcations(fig, result, top: float) -> None:
+    bifs = tuple(getattr(result, "bifurcations", ()))
+    ax = fig.add_axes((0.05, top - 0.08, 0.90, 0.08))
+    ax.set_axis_off()
+    if not bifs:
+        ax.text(0, 0.8, "Bifurcations: none reconstructed (one segment)", fontsize=8)
+        return
+    ax.set_title("Bifurcations (Medina: 1 where that segment has ≥ 50 % diameter stenosis; "
+                 "the side branch's first 10 mm from its carina, its ostium included)",
+                 fontsize=8, loc="left")
+    header = ["Bifurcation", "Main › side branch", "Medina", "Angle", "Proximal angle",
+              "%DS proximal main", "%DS distal main", "%DS side branch"]
+    rows = [[b.name, f"{b.parent} › {b.branch}", b.medina, f"{b.bifurcation_angle_deg:.0f}°",
+             f"{b.proximal_angle_deg:.0f}°", f"{b.proximal_main.diameter_stenosis_pct:.0f} %",
+             f"{b.distal_main.diameter_stenosis_pct:.0f} %",
+             f"{b.side_branch.diameter_stenosis_pct:.0f} %"] for b in bifs]
+    table = ax.table(cellText=rows, colLabels=header, loc="upper left", cellLoc="left")
+    table.auto_set_font_size(False)
+    table.set_fontsize(6.5)
+    table.scale(1.0, 1.25)
+
+
+# ------------------------------------------------------------------ a segment's page
+def segment_figure(result, rec: Reconstruction) -> object:
+    """One segment's page (module docstring)."""
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=A4_IN)
+    parent = rec.seeds.segments[rec.options.segment].parent
+    fig.text(0.05, 0.975, f"Segment {_name(rec)}" + (f" (branch of {parent})" if parent
+                                                      else ""),
+             fontsize=13, weight="bold", va="top")
+    fig.text(0.05, 0.952, f"coronary3d {__version__} · RESEARCH USE ONLY", fontsize=8,
+             color="firebrick", va="top")
+    _draw_profile(fig.add_axes((0.09, 0.62, 0.86, 0.29)), result, rec)
+    _draw_figures(fig, rec)
+    _draw_lesions(fig, rec)
+    return fig
+
+
+def _draw_profile(ax, result, rec: Reconstruction) -> None:
+    prof = rec.profile
+    m = rec.measurements
+    top = float(np.max(prof.diameter_mm)) * 1.25
+    lo_t, hi_t = prof.trusted_range_mm
+    labels = ["ostium zone" if prof.ostium else "end zone", "end zone"]
+    for (a, b), label in zip(((prof.s_mm[0], lo_t), (hi_t, prof.s_mm[-1])), labels,
+                             strict=True):
+        if b > a:
+            ax.axvspan(a, b, color="0.92", label=label, zorder=0)
+            labels[1] = "_" if label == "end zone" else labels[1]
+    for band in side_branch_bands(result, rec):
+        ax.axvspan(band["start_mm"], band["end_mm"], color="lightblue", alpha=0.6, zorder=0,
+                   label=f"side branch {band['name']}")
+    for view in ("a", "b"):
+        for k, (a, b) in enumerate(rec.centerline_3d.overlap_stretches_mm(view)):
+            ax.axvspan(a, b, facecolor="none", edgecolor="darkorange", hatch="///", lw=0,
+                       zorder=0, label=f"view {view.upper()} radius replaced (overlap)"
+                       if k == 0 else "_")
+    for k, n in enumerate(rec.lesions.unsupported):
+        ax.axvspan(n.start_s_mm, n.end_s_mm, facecolor="none", edgecolor="gray", hatch="..",
+                   lw=0, label="narrowing not confirmed" if k == 0 else "_")
+    for k, les in enumerate(rec.lesions.lesions):
+        n = les.narrowing
+        ax.axvspan(n.start_s_mm, n.end_s_mm, color="mistyrose", zorder=0,
+                   label="lesion" if k == 0 else "_")
+        ax.plot(n.mld_s_mm, n.mld_mm, "o", color="magenta", ms=5)
+        ax.text(0.5 * (n.start_s_mm + n.end_s_mm), top * (0.97 - 0.06 * (k % 2)),
+                str(les.number), ha="center", va="top", fontsize=9, weight="bold",
+                color="crimson")
+    iv = rec.intervals
+    if iv is not None:
+        s3 = rec.centerline_3d.s_mm
+        inside = (s3 >= prof.s_mm[0]) & (s3 <= prof.s_mm[-1])
+        ax.fill_between(s3[inside], 2 * iv.radius_lo_mm[inside], 2 * iv.radius_hi_mm[inside],
+                        color="cornflowerblue", alpha=0.25, lw=0, label="diameter, 95 %")
+    ax.plot(prof.s_mm, prof.diameter_mm, color="lightsteelblue", lw=0.8, label="measured")
+    ax.plot(prof.s_mm, prof.diameter_smooth_mm, color="navy", lw=1.4, label="smoothed")
+    ax.plot(prof.s_mm, prof.reference_diameter_mm, color="gray", ls="--", label="reference")
+    if not m.has_lesion:
+        ax.plot(m.mld_s_mm, m.mld_mm, "o", color="magenta", ms=5, label="MLD (no lesion)")
+    ax.set_ylim(0.0, top)
+    ax.set_xlabel("distance along the 3D centerline (mm)", fontsize=8)
+    ax.set_ylabel("diameter (mm)", fontsize=8)
+    ax.tick_params(labelsize=7)
+    ax.set_title("Diameter profile", fontsize=9)
+    ax.legend(fontsize=6.5, loc="upper center", bbox_to_anchor=(0.5, -0.14), ncol=4,
+              frameon=False)
+
+
+def _draw_figures(fig, rec: Reconstruction) -> None:
+    m = rec.measurements
+    prof = rec.profile
+    ax = fig.add_axes((0.05, 0.27, 0.45, 0.22))
+    ax.set_axis_off()
+    ax.set_title("Measurements (95 % interval)", fontsize=9, loc="left")
+    ref_prox = float(np.interp(m.lesion_start_s_mm, prof.s_mm, prof.reference_diameter_mm))
+    ref_dist = float(np.interp(m.lesion_end_s_mm, prof.s_mm, prof.reference_diameter_mm))
+    rows = [
+        ("Minimal lumen diameter", _with_ci(m.mld_mm, _ci(rec, "mld_mm"), ".2f", "mm")),
+        ("% diameter stenosis", _with_ci(m.diameter_stenosis_pct,
+                                         _ci(rec, "diameter_stenosis_pct"), ".0f", "%")),
+        ("% area stenosis", _with_ci(m.area_stenosis_pct, _ci(rec, "area_stenosis_pct"),
+                                     ".0f", "%")),
+        ("Minimal lumen area", _with_ci(m.mla_mm2, _ci(rec, "mla_mm2"), ".2f", "mm²")),
+        ("Reference diameter at the MLD", _with_ci(m.reference_diameter_mm,
+                                                   _ci(rec, "reference_diameter_mm"), ".2f",
+                                                   "mm")),
+        ("Proximal / distal reference", f"{ref_prox:.2f} / {ref_dist:.2f} mm"),
+        ("Lesion length", _with_ci(m.lesion_length_mm, _ci(rec, "lesion_length_mm"), ".1f",
+                                   "mm")),
+        ("Segment length", _with_ci(m.segment_length_mm, _ci(rec, "segment_length_mm"),
+                                    ".1f", "mm")),
+        ("MLD at", _with_ci(m.mld_s_mm, _ci(rec, "mld_s_mm"), ".1f", "mm")),
+    ]
+    ffr = getattr(rec, "ffr", None)
+    if ffr is not None:
+        rows.append(("FFR (model estimate)", _with_ci(ffr.distal, ffr.ci95, ".2f", "")))
+    table = ax.table(cellText=rows, colWidths=[0.5, 0.5], loc="upper left", cellLoc="left")
+    table.auto_set_font_size(False)
+    table.set_fontsize(7)
+    table.scale(1.0, 1.25)
+
+
+def _draw_lesions(fig, rec: Reconstruction) -> None:
+    report = rec.lesions
+    ax = fig.add_axes((0.05, 0.05, 0.90, 0.17))
+    ax.set_axis_off()
+    ax.set_title("Lesions (95 % interval)", fontsize=9, loc="left")
+    if not report.lesions:
+        ax.text(0.0, 0.9, "none", fontsize=8, va="top")
+    else:
+        header = ["#", "Site", "MLD", "%DS", "Length", "Found"]
+        rows = []
+        for les in report.lesions:
+            n, ci = les.narrowing, les.ci95
+            rows.append([
+                str(les.number), f"{n.mld_s_mm:.1f} mm" + (f" ({n.zone})" if n.zone else ""),
+                _with_ci(n.mld_mm, ci.get("mld_mm"), ".2f", "mm"),
+                _with_ci(n.diameter_stenosis_pct, ci.get("diameter_stenosis_pct"), ".0f", "%"),
+                _with_ci(n.length_mm, ci.get("length_mm"), ".1f", "mm"),
+                "—" if les.found_fraction is None else f"{100 * les.found_fraction:.0f} %"])
+        table = ax.table(cellText=rows, colLabels=header, loc="upper left", cellLoc="left",
+                         colWidths=[0.04, 0.2, 0.22, 0.18, 0.2, 0.1])
+        table.auto_set_font_size(False)
+        table.set_fontsize(6.5)
+        table.scale(1.0, 1.25)
+    summary = report.summary()
+    fig.text(0.54, 0.49, _wrap(summary[:1].upper() + summary[1:] + ".", 60),
+             fontsize=7.5, va="top")
+    fig.text(0.54, 0.36, _wrap(
+        "Found: the share of the 95 % intervals' posterior draws that found a lesion on "
+        "that stretch. A narrowing in the first or last 5 mm of a segment, or in a branch's "
+        "ostium zone, is a lesion only when the profile past the zone shows it too; below "
+        "25 % diameter stenosis a narrowing is an irregularity, not a lesion.", 75),
+             fontsize=6.5, va="top", color="dimgray")
+
+
+# ------------------------------------------------------------------ the document
+def report_pages(result, image_a: NDArray | None, image_b: NDArray | None,
+                 identify: bool = False) -> list:
+    """Every page: the overview, then one per segment."""
+    return [report_figure(result, image_a, image_b, identify),
+            *(segment_figure(result, rec) for rec in _segments(result))]
+
+
+def report_pdf_bytes(result: Reconstruction | TreeReconstruction, image_a: NDArray | None,
+                     image_b: NDArray | None, identify: bool = False) -> bytes:
+    """The report as PDF bytes. ``image_a``, ``image_b``: (H, W) the frames used (None: the
+    traces are drawn without them)."""
     from matplotlib.backends.backend_pdf import PdfPages
 
-    fig = report_figure(rec, image_a, image_b, identify)
     buf = io.BytesIO()
     with PdfPages(buf, metadata={"Title": "coronary3d report", "Creator": "coronary3d",
                                  "Producer": f"coronary3d {__version__}",
                                  "CreationDate": None}) as pdf:
-        pdf.savefig(fig)
+        for fig in report_pages(result, image_a, image_b, identify):
+            pdf.savefig(fig)
     return buf.getvalue()
+
+
+def write_report_pdf(result: Reconstruction | TreeReconstruction, path: str | os.PathLike,
+                     image_a: NDArray | None = None, image_b: NDArray | None = None,
+                     identify: bool = False) -> Path:
+    """Write the report of a reconstruction (one segment or a tree) to ``path``, whole or
+    not at all, and return the path (the page's call)."""
+    from recon.io.files import atomic_write_bytes
+
+    atomic_write_bytes(path, report_pdf_bytes(result, image_a, image_b, identify))
+    return Path(path)

@@ -187,14 +187,15 @@ def test_reconstruct_geometry_per_file_and_a_replaced_header_value_is_said(tmp_p
     assert "a.dcm: " not in proc.stderr  # ... and view A kept its header
 
 
-def test_reconstruct_report_writes_a_one_page_pdf_without_patient_data(tmp_path):
+def test_reconstruct_report_writes_the_pdf_without_patient_data(tmp_path):
     out = tmp_path / "out"
     a, b = str(DATA / "IM1.dcm"), str(DATA / "IM2.dcm")
     proc = run_cli("reconstruct", a, b, "--seeds", str(DATA / "im1_im2_seeds.json"),
                    "--out", str(out), "--report", "--quiet")
     assert proc.returncode == 0, proc.stderr
     pdf = (out / "report.pdf").read_bytes()
-    assert pdf.startswith(b"%PDF") and len(re.findall(rb"/Type\s*/Page[^s]", pdf)) == 1
+    # the overview and the one segment's page (issue 46: the whole reconstruction)
+    assert pdf.startswith(b"%PDF") and len(re.findall(rb"/Type\s*/Page[^s]", pdf)) == 2
     report = json.loads((out / "report.json").read_text())
     best = report["optimal_view"]
     assert len(best["angles_deg"]) == 2 and 0.0 <= best["foreshortening_pct"] < 100.0

@@ -1,12 +1,17 @@
-"""recon.io.report_pdf: the one-page report, its texts and the patient data rule."""
+"""recon.io.report_pdf: the report of the whole reconstruction, its texts, the patient data
+rule, and the PDF read back with pypdf (issue 46 item 7)."""
 
 from __future__ import annotations
 
+import re
+
+import numpy as np
 import pydicom
+import pypdf
 import pytest
 from matplotlib.table import Table
 from matplotlib.text import Text
-from support import DATA
+from support import DATA, DEMO, run_cli
 
 from recon.io import load_angiogram, load_seeds
 from recon.pipeline import reconstruct_pair
@@ -26,20 +31,23 @@ def _texts(fig) -> str:
     return "\n".join(texts)
 
 
-def test_the_page_says_what_a_clinician_needs_and_no_patient_data(case) -> None:
-    from recon.io.report_pdf import report_figure
+def test_the_pages_say_what_a_clinician_needs_and_no_patient_data(case) -> None:
+    from recon.io.report_pdf import report_pages
 
     rec, a, b = case
-    text = _texts(report_figure(rec, a.image, b.image))
+    pages = report_pages(rec, a.image, b.image)
+    assert len(pages) == 2  # the overview and the one segment's page
+    text = "\n".join(_texts(p) for p in pages)
     m = rec.measurements
     for needed in ("RESEARCH USE ONLY", "IM1.dcm", "IM2.dcm", "Minimal lumen diameter",
                    f"{m.mld_mm:.2f} mm", f"{m.diameter_stenosis_pct:.0f} %",
-                   "Best next view", "Foreshortening in A / B", "Diameter profile"):
+                   "Best next view", "Foreshortening in A / B", "Diameter profile",
+                   "diagonal branch"):
         assert needed in text, needed
     ds = pydicom.dcmread(DATA / "IM1.dcm", stop_before_pixels=True)
     private = [str(ds.PatientName), str(ds.PatientID)]
     assert all(p and p not in text for p in private)
-    shown = _texts(report_figure(rec, a.image, b.image, identify=True))
+    shown = "\n".join(_texts(p) for p in report_pages(rec, a.image, b.image, identify=True))
     assert all(p in shown for p in private)  # asked for with --identify
 
 
@@ -62,3 +70,84 @@ def test_written_whole_as_part_of_the_output_set(case, tmp_path) -> None:
     manifest = json.loads((out / "outputs.json").read_text())
     assert manifest["complete"] is True
     assert manifest["files"]["report.pdf"]["sha256"] == hashlib.sha256(data).hexdigest()
+
+
+# ------------------------------------------------------------ the whole tree
+@pytest.fixture(scope="module")
+def tree_pdf(tmp_path_factory):
+    """`coronary3d reconstruct --demo --report` on the demo with its side branch clicked."""
+    import json
+
+    from recon.io.seeds_file import save_seeds
+    from recon.synth import make_phantom
+    from recon.synth.tree_case import tree_seeds
+
+    seeds, _, _ = tree_seeds(np.random.default_rng(1), make_phantom("static", 7, render=False))
+    root = tmp_path_factory.mktemp("tree_pdf")
+    save_seeds(seeds, root / "seeds.json")
+    proc = run_cli("reconstruct", "--demo", "--seeds", str(root / "seeds.json"), "--report",
+                   "--quiet", "--out", str(root / "out"))
+    assert proc.returncode == 0, proc.stderr
+    report = json.loads((root / "out" / "report.json").read_text())
+    pages = [p.extract_text() for p in pypdf.PdfReader(root / "out" / "report.pdf").pages]
+    return report, pages
+
+
+def _ci_text(value: float, ci: list[float], fmt: str, unit: str) -> str:
+    return f"{value:{fmt}} {unit} ({ci[0]:{fmt}}–{ci[1]:{fmt}})"
+
+
+def test_the_pdf_shows_every_segment_with_its_intervals(tree_pdf):
+    report, pages = tree_pdf
+    names = [b["inputs"]["segment"] for b in report["branches"]]
+    assert names == ["main", "branch 1"] and len(pages) == 1 + len(names)
+    overview = pages[0]
+    for branch, page in zip(report["branches"], pages[1:], strict=True):
+        m, ci = branch["measurements"], branch["measurements_ci95"]
+        assert f"Segment {branch['inputs']['segment']}" in page
+        for key, fmt, unit in (("mld_mm", ".2f", "mm"), ("diameter_stenosis_pct", ".0f", "%"),
+                               ("segment_length_mm", ".1f", "mm"),
+                               ("lesion_length_mm", ".1f", "mm")):
+            text = _ci_text(m[key], ci[key], fmt, unit)
+            assert text in page, (branch["inputs"]["segment"], text)
+            assert text in overview, (branch["inputs"]["segment"], text)
+    # the main's lesion, numbered, with its own intervals; the side branch's ostium
+    (lesion,) = report["branches"][0]["lesions"]
+    assert _ci_text(lesion["diameter_stenosis_pct"], lesion["ci95"]["diameter_stenosis_pct"],
+                    ".0f", "%") in pages[1]
+    assert "1 lesion: lesion 1 at" in pages[1]
+    side = re.sub(r"\s+", " ", pages[2])
+    assert "No lesion; a" in side and "(ostium) is not confirmed" in side
+    assert "none (ostium not confirmed)" in overview
+
+
+def test_the_pdf_has_the_bifurcation_table_and_the_charts_bands(tree_pdf):
+    report, pages = tree_pdf
+    (bif,) = report["bifurcations"]
+    overview = re.sub(r"\s+", " ", pages[0])
+    assert "Medina" in overview and f"main › branch 1 {bif['medina']}" in overview
+    assert f"{bif['bifurcation_angle_deg']:.0f}°" in overview
+    main_page = re.sub(r"\s+", " ", pages[1])
+    assert "side branch branch 1" in main_page  # where the side branch leaves the main
+    assert "lesion" in main_page and "end zone" in main_page
+    if report["branches"][0]["centerline"]["overlap_a_mm"]:
+        assert "view A radius replaced (overlap)" in main_page
+    assert "ostium zone" in re.sub(r"\s+", " ", pages[2])
+
+
+def test_no_patient_data_in_the_pdf_unless_asked(tree_pdf):
+    _, pages = tree_pdf
+    ds = pydicom.dcmread(DEMO / "a.dcm", stop_before_pixels=True)
+    assert not any(str(ds.PatientID) in p or str(ds.PatientName) in p for p in pages)
+
+
+def test_write_report_pdf_is_the_pages_call(case, tmp_path):
+    from recon.io.report_pdf import write_report_pdf
+
+    rec, a, b = case
+    path = write_report_pdf(rec, tmp_path / "r.pdf", a.image, b.image)
+    reader = pypdf.PdfReader(path)
+    assert len(reader.pages) == 2 and "Segment diagonal branch" in reader.pages[1].extract_text()
+    # without the images the traces are still drawn, and it says so
+    path = write_report_pdf(rec, tmp_path / "no-images.pdf")
+    assert "image not given" in pypdf.PdfReader(path).pages[0].extract_text()
