@@ -34,6 +34,7 @@ from viewer_app.access import PATCHED_VISER_VERSION, FileAccess, ServerGuard, gu
 from viewer_app.autosave import Autosave, default_autosave_path
 from viewer_app.camera import PageCameras
 from viewer_app.catheter import CatheterTool
+from viewer_app.editing import MarkEditing
 from viewer_app.exports import EXPORT_KINDS
 from viewer_app.panels import Panels, build_panels
 from viewer_app.patients import PatientPrompt
@@ -56,7 +57,7 @@ SNAP_MAX_PX = 8.0
 FloatArray = NDArray[np.float64]
 
 
-class ViewerApp(RunCommands):
+class ViewerApp(MarkEditing, RunCommands):
     """The viewer: a viser server plus the state of one image pair.
 
     Parameters
@@ -260,7 +261,8 @@ class ViewerApp(RunCommands):
                 self.notify("Autosave kept aside", self.autosave.notice, "warning")
             self.state._history.clear()
             for v in self.views.values():
-                scene.add_view_nodes(self.server.scene, v, self._make_click_callback(v.key))
+                scene.add_view_nodes(self.server.scene, v, self._make_click_callback(v.key),
+                                     self._make_drag_callback(v.key))
             self.panels.show_pair(self.views)
             self.patients_differ = opening.patients_differ((angio_a.path, angio_b.path))
             self.patients_confirmed = False

@@ -100,6 +100,7 @@ class MarksPanel:
     new_branch: viser.GuiButtonHandle  # a branch of the current segment at the selected landmark
     select: viser.GuiDropdownHandle
     undo: viser.GuiButtonHandle
+    delete: viser.GuiButtonHandle  # the selected mark
     clear: viser.GuiButtonHandle
     summary: viser.GuiMarkdownHandle
 
@@ -326,6 +327,15 @@ def marks_folder(gui: viser.GuiApi, app: PageCommands, refreshing: Refreshing) -
         async def _(event: viser.GuiEvent) -> None:
             app.undo()
 
+        delete = gui.add_button("Delete selected mark", icon=viser.Icon.ERASER,
+                                hint="Delete the mark chosen under 'Selected mark' (the one "
+                                "last clicked or dragged); Undo brings it back. To move a "
+                                "mark, drag it on its image.")
+
+        @delete.on_click
+        async def _(event: viser.GuiEvent) -> None:
+            app.delete_selected(client=event.client)
+
         clear = gui.add_button("Clear marks", icon=viser.Icon.TRASH, color="red")
 
         @clear.on_click
@@ -336,7 +346,7 @@ def marks_folder(gui: viser.GuiApi, app: PageCommands, refreshing: Refreshing) -
     return MarksPanel(warning=warning, patients=patients, confirm_patients=confirm_patients,
                       guide=guide, mode=mode, segment=segment, name=name,
                       rename=rename, new_segment=new_segment, new_branch=new_branch,
-                      select=select, undo=undo, clear=clear, summary=summary)
+                      select=select, undo=undo, delete=delete, clear=clear, summary=summary)
 
 
 GEOMETRY_WORDS = {"sid_mm": "SID (mm)", "sod_mm": "SOD (mm)",

@@ -197,8 +197,10 @@ def overlay_name(key: str) -> str:
     return f"/over_{key}"
 
 
-def add_view_nodes(scene: viser.SceneApi, v: View, on_click: Callable) -> ViewNodes:
-    """Add ``/view_<key>`` (the image, clicks go to ``on_click``) and its empty overlays
+def add_view_nodes(scene: viser.SceneApi, v: View, on_click: Callable,
+                   on_drag: Callable | None = None) -> ViewNodes:
+    """Add ``/view_<key>`` (the image, clicks go to ``on_click``, left drags to
+    ``on_drag``: the image takes them, the camera does not turn) and its empty overlays
     under ``/over_<key>``; the overlays of a previous pair are removed first."""
     image_name, name = f"/view_{v.key}", overlay_name(v.key)
     scene.remove_by_name(name)  # and every child: marks, labels, results of the old pair
@@ -214,6 +216,8 @@ def add_view_nodes(scene: viser.SceneApi, v: View, on_click: Callable) -> ViewNo
         receive_shadow=False,
     )
     image.on_click(on_click)
+    if on_drag is not None:
+        image.on_drag(on_drag)
     root = scene.add_frame(name, show_axes=False, position=tuple(v.position))
     empty_pts = np.zeros((0, 3), np.float32)
     empty_seg = np.zeros((0, 2, 3), np.float32)

@@ -552,3 +552,35 @@ def test_two_patients_are_refused_until_the_page_confirms_them(
     # One patient's files again: no warning, nothing to confirm.
     assert app.open_pair(str(demo_case["a"]), str(demo_case["b"]))
     assert not app.patients_differ and not app.panels.marks.patients.visible
+
+
+def test_a_mark_is_moved_by_a_drag_in_one_undo_step_and_the_selected_one_deleted(
+        app: ViewerApp, tmp_path: Path) -> None:
+    """Issue 46 item 8 without the browser: a drag that starts on a mark's dot grabs it,
+    moves it raw, snaps it where it ends, autosaves it, and one Undo undoes it; a drag
+    that starts away from every mark grabs none; Delete removes the selected mark."""
+    app.wait_ready()
+    mark = next(m for m in app.state.marks if m.view == "a" and m.kind == "distal")
+    assert app.grab_mark("a", 5.0, 5.0) is None  # no mark there
+    assert app.drag_mark_to(100.0, 100.0, final=True) is None
+    grabbed = app.grab_mark("a", mark.point_px[0] + 3.0, mark.point_px[1] - 2.0)
+    assert grabbed == mark and app.state.selected_id == mark.id
+    waypoint = [m for m in app.state.marks if m.view == "a" and m.kind == "waypoint"][-1]
+    goal = (np.asarray(mark.point_px) + waypoint.point_px) / 2  # along the vessel
+    raw = app.drag_mark_to(*(goal + [3.0, 3.0]))
+    assert raw.snap_distance_px is None and raw.point_px == tuple(goal + [3.0, 3.0])
+    moved = app.drag_mark_to(*goal, final=True)
+    assert moved.id == mark.id and moved.snap_distance_px is not None
+    assert np.hypot(*(np.asarray(moved.point_px) - goal)) < 8.0
+    saved = json.loads(app.autosave.path.read_text())
+    assert moved.point_px in [tuple(p) for s in saved["segments"] for p in s["a"]]
+    assert app.undo() and app.state.mark_by_id(mark.id) == mark  # one step for the drag
+    assert app.move_mark(mark.id, *goal) is not None
+    assert app.undo() and app.state.mark_by_id(mark.id) == mark
+    app.select(mark.id)
+    assert app.delete_selected() == mark and app.state.mark_by_id(mark.id) is None
+    assert app.delete_selected() is None
+    assert app.notifications[-1][:2] == ("error", "Delete mark failed")
+    assert app.undo() and app.state.mark_by_id(mark.id) == mark
+    app.catheter.pending = ("a", 6.0)  # a catheter measurement waits: drags move no mark
+    assert app.grab_mark("a", *mark.point_px) is None

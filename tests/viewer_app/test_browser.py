@@ -256,9 +256,18 @@ def test_guided_session_from_an_empty_page_to_a_mesh(
             b.shot("guided_7_reconstructed.png")
             assert app.layout == "Angiograms + 3D"
 
-            # Dragging rotates the model, never the angiograms: the page turns to the
-            # model alone, and "Angiograms + 3D" brings the straight view back.
-            cx, cy = b.screen_xy("a", 256, 256)
+            # A drag on an image turns nothing (issue 46: it hid the angiograms); a drag
+            # on the model rotates it: the page turns to the model alone, and
+            # "Angiograms + 3D" brings the straight view back.
+            cx, cy = b.screen_xy("a", 60, 60)
+            b.page.mouse.move(cx, cy)
+            b.page.mouse.down()
+            b.page.mouse.move(cx + 160, cy + 40, steps=12)
+            b.page.mouse.up()
+            b.page.wait_for_timeout(800)
+            assert app.layout == "Angiograms + 3D" and app.views["a"].nodes.image.visible
+            box = screen_box(b, "/model/mesh")
+            cx, cy = (box[0] + box[2]) / 2, (box[1] + box[3]) / 2
             b.page.mouse.move(cx, cy)
             b.page.mouse.down()
             b.page.mouse.move(cx + 160, cy + 40, steps=12)
