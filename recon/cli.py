@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import importlib
 import json
 import os
 import sys
@@ -17,6 +16,7 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 
+from recon.bench.command import add_bench_parser, bench_call
 from recon.cli_inputs import add_ffr_options, ffr_words
 from recon.cli_inputs import number_arg as _number
 from recon.errors import CoronaryError
@@ -25,8 +25,6 @@ from recon.startup import cap_math_threads
 EXIT_USER_ERROR = 2
 _REAL_PROCESS = False  # main() runs as the process itself (not called in-process by a test)
 
-BENCHES = ("centerline", "calibration", "matching", "reconstruct", "speed", "intervals",
-           "sections", "optimal-view", "calibration-modes", "ffr")
 
 
 class _Parser(argparse.ArgumentParser):
@@ -279,48 +277,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="port to serve on (0: any free port)")
     _add_geometry_options(p, per_file=True)
 
-    p = sub.add_parser(
-        "bench",
-        help="accuracy and speed benchmarks against phantom ground truth",
-        description="Run a benchmark on synthetic phantom cases, print a table, and write "
-        "the figures as JSON.",
-    )
-    p.add_argument("name", choices=BENCHES)
-    p.add_argument("--json", metavar="PATH", help="write the result here")
-    p.add_argument(
-        "--cases",
-        type=_COUNT,
-        help="number of cases (per geometry for calibration, per imaging chain for "
-        "--suite varied; repetitions for speed)",
-    )
-    p.add_argument("--seed", type=_number(int, 0, 2**32 - 1), default=0)
-    p.add_argument(
-        "--suite",
-        choices=("regular", "varied", "tree", "tree-varied"),
-        default="regular",
-        help="regular: the plain phantom (default); varied: every imaging chain (detector, "
-        "mapping, blur, glare, noise, background, bit depth) x harder anatomy (centerline "
-        "and reconstruct only); tree: phantom trees with bifurcation lesions at Table-1 and "
-        "random geometries, every branch reconstructed (reconstruct only); tree-varied: the "
-        "same trees rendered through the imaging chains",
-    )
-    p.add_argument(
-        "--jitter",
-        type=_INDEX,
-        default=0,
-        metavar="N",
-        help="reconstruct only: N more runs per case with every click moved up to 2 px; "
-        "reports the spread of MLD, %%DS and the MLD site",
-    )
-    p.add_argument(
-        "--workers",
-        type=_COUNT,
-        metavar="N",
-        help="reconstruct, regular suite: run the cases on a local Dask cluster of N "
-        "worker processes (the engine of `coronary3d batch`)",
-    )
-    p.add_argument("--tracer", choices=("2d", "3d"), default="2d",
-                   help="reconstruct, regular and varied suites: the pipeline's tracer")
+    add_bench_parser(sub)
     return parser
 
 
@@ -594,52 +551,13 @@ def cmd_view(args: argparse.Namespace) -> int:
 
 
 def cmd_bench(args: argparse.Namespace) -> int:
-    tree_suite = args.name == "reconstruct" and args.suite.startswith("tree")
-    # the tree suites' end-to-end bench has its own module (recon.bench.tree)
-    name = "tree" if tree_suite else args.name.replace("-", "_")
-    module = importlib.import_module(f"recon.bench.{name}")
-    extra = {}
-    if args.suite.startswith("tree") and args.name != "reconstruct":
-        print(f"coronary3d: error: bench {args.name} has no --suite {args.suite} "
-              "(reconstruct has)",
-              file=sys.stderr)
+    try:
+        run, fmt, kwargs = bench_call(args)
+    except ValueError as err:
+        print(f"coronary3d: error: {err}", file=sys.stderr)
         return EXIT_USER_ERROR
-    suites = ("centerline", "reconstruct", "calibration-modes")
-    if args.name in suites:
-        extra["suite"] = args.suite
-    elif args.suite != "regular":
-        print(f"coronary3d: error: bench {args.name} has no --suite {args.suite} "
-              f"({', '.join(suites)} have)", file=sys.stderr)
-        return EXIT_USER_ERROR
-    if args.jitter:
-        if args.name != "reconstruct" or args.jitter < 0:
-            print("coronary3d: error: --jitter N (N >= 1) is for bench reconstruct",
-                  file=sys.stderr)
-            return EXIT_USER_ERROR
-        extra["jitter"] = args.jitter
-    if args.workers is not None:
-        if args.workers < 1 or not (args.name in ("intervals", "calibration-modes") or (
-                args.name == "reconstruct" and args.suite == "regular")):
-            print("coronary3d: error: --workers N (N >= 1) is for bench reconstruct (regular "
-                  "suite), intervals and calibration-modes", file=sys.stderr)
-            return EXIT_USER_ERROR
-        extra["workers"] = args.workers
-    if args.tracer != "2d":
-        if args.name != "reconstruct" or tree_suite:
-            print("coronary3d: error: --tracer is for bench reconstruct (regular and varied "
-                  "suites)", file=sys.stderr)
-            return EXIT_USER_ERROR
-        extra["tracer"] = args.tracer
-    if tree_suite:
-        if args.jitter:
-            print("coronary3d: error: --jitter is for the regular and varied suites",
-                  file=sys.stderr)
-            return EXIT_USER_ERROR
-        result = module.run_tree(args.cases, args.seed, args.suite)
-        print(module.format_tree(result))
-    else:
-        result = module.run(cases=args.cases, seed=args.seed, **extra)
-        print(module.format_table(result))
+    result = run(**kwargs)
+    print(fmt(result))
     if args.json:
         from recon.io.files import atomic_write_bytes
 
