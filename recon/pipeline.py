@@ -46,7 +46,7 @@ from recon.lumen import (
     measure_lumen,
     with_fill_ratios,
 )
-from recon.lumen.ffr import FFRModel, FFRResult, vessel_ffr
+from recon.lumen.ffr import FFRError, FFRModel, FFRResult, vessel_ffr
 from recon.lumen.lesions import LesionReport, lesion_report
 from recon.pose import (
     CORRECTIONS,
@@ -422,6 +422,7 @@ def reconstruct_pair(
     options = options or ReconstructionOptions()
     seg = _segment(seeds, options.segment)
     check_calibration(options)
+    model = ffr_model(options)  # a pressure or velocity out of range: refused before any work
     if options.tracer not in TRACER_CHOICES:
         raise PipelineError(f"unknown tracer {options.tracer!r} (use one of "
                             f"{', '.join(TRACER_CHOICES)})")
@@ -543,10 +544,15 @@ def reconstruct_pair(
 
     # 10. FFR along the segment and its interval over the intervals' draws (recon.lumen.ffr);
     #     a tree's branch is solved with its whole tree (recon.tree).
+    #     A lumen the model cannot carry (it closes, or is too short) leaves the QCA
+    #     standing: no FFR, and a warning that says why.
     ffr = None
     if junction is None:
-        ffr = vessel_ffr(profile, intervals.profiles if intervals is not None else (),
-                         ffr_model(options), seg.name)
+        try:
+            ffr = vessel_ffr(profile, intervals.profiles if intervals is not None else (),
+                             model, seg.name)
+        except FFRError as err:
+            warnings.append(f"FFR not computed: {err}")
         lap("ffr")
     timings["total"] = round(sum(timings.values()), 2)
     _notify(progress, "done", 1.0)

@@ -40,7 +40,7 @@ from recon.lumen import (
     measure_lumen,
 )
 from recon.lumen.bifurcation import nearest_on_polyline
-from recon.lumen.ffr import FFRVessel, Lumen, tree_ffr
+from recon.lumen.ffr import FFRError, FFRVessel, Lumen, tree_ffr
 from recon.lumen.lesions import ostium_zone_end_s_mm
 from recon.pipeline import (
     PipelineError,
@@ -205,6 +205,7 @@ def reconstruct_tree(
     if not seeds.segments:
         raise PipelineError("seeds: no segment to reconstruct (segments is empty)")
     check_calibration(options)
+    ffr_model(options)  # a pressure or velocity out of range: refused before any work
     _check_separation(angio_a.geometry, angio_b.geometry, options.allow_close_views)
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
@@ -310,7 +311,11 @@ def _with_tree_ffr(seeds: Seeds, branches: list[Reconstruction],
                                                        for p in rec.intervals.profiles)
         vessels.append(FFRVessel(Lumen.from_profile(rec.profile), parent, join_s, draws,
                                  seg.name))
-    results = tree_ffr(vessels, ffr_model(options))
+    try:
+        results = tree_ffr(vessels, ffr_model(options))
+    except FFRError as err:  # the QCA stands; no FFR, and the tree's report says why
+        note = f"FFR not computed: {err}"
+        return [replace(rec, ffr=None, warnings=(*rec.warnings, note)) for rec in branches]
     return [replace(rec, ffr=result) for rec, result in zip(branches, results, strict=True)]
 
 

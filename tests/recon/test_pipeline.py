@@ -48,7 +48,7 @@ def test_phantoms_measured_against_truth(phantom_rows):
 
 def test_matchers_and_optimizers_are_selectable():
     case = make_phantom("static", 3)
-    from recon.bench.reconstruct import _angiogram
+    from recon.bench.common import _angiogram
 
     a = _angiogram(case.image_a, case.view_a, "a")
     b = _angiogram(case.image_b, case.view_b_nominal, "b")
@@ -151,3 +151,23 @@ def test_views_closer_than_25_deg_are_refused_unless_allowed() -> None:
     assert "unreliable" in line
     with pytest.raises(PipelineError, match="same place"):  # one view paired with itself
         _check_separation(a, a, allow=True)
+
+
+def test_a_lumen_the_ffr_model_cannot_carry_leaves_the_qca_with_a_warning(monkeypatch):
+    import recon.pipeline as pipeline
+    from recon.lumen.ffr import FFRError
+
+    case = make_phantom("static", 3)
+    from recon.bench.common import _angiogram
+
+    a = _angiogram(case.image_a, case.view_a, "a")
+    b = _angiogram(case.image_b, case.view_b_nominal, "b")
+
+    def closes(*args, **kwargs):
+        raise FFRError("FFR: segment 'main': the lumen closes at 12.0 mm")
+
+    monkeypatch.setattr(pipeline, "vessel_ffr", closes)
+    rec = reconstruct_pair(a, b, case.seeds, ReconstructionOptions())
+    assert rec.ffr is None and rec.measurements.mld_mm > 0
+    assert any(w.startswith("FFR not computed: FFR: segment 'main': the lumen closes")
+               for w in rec.warnings)
