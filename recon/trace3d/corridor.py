@@ -30,6 +30,8 @@ FloatArray = NDArray[np.float64]
 #: Half-width of the corridor (px): at least this, or this many vessel radii.
 CORRIDOR_MIN_PX = 3.0
 CORRIDOR_PER_RADIUS = 1.0
+#: Clicks closer than this (px) are refused by the 2D tracing (recon.trace.centerline).
+MIN_CLICK_GAP_PX = 2.0
 
 
 def corridor_map(vmap: VesselnessMap, path_px: FloatArray) -> VesselnessMap:
@@ -100,11 +102,19 @@ def clicks_on_path(clicks_px: FloatArray, path_px: FloatArray) -> FloatArray:
     """The clicks (K, 2) the 2D tracing starts from inside the corridor: the end clicks as
     clicked (the path's image is extended to them), each waypoint moved to the nearest
     point of the path's image (M, 2), in order."""
-    c = np.asarray(clicks_px, dtype=float).copy()
+    clicked = np.asarray(clicks_px, dtype=float)
+    c = clicked.copy()
     if len(c) > 2:
         d = np.linalg.norm(c[1:-1, None, :] - path_px[None, :, :], axis=2)
         at = np.maximum.accumulate(np.argmin(d, axis=1))
         c[1:-1] = path_px[at]
+        # a waypoint that would land on its neighbour (the path passed them at one place)
+        # stays as clicked
+        close = np.linalg.norm(np.diff(c, axis=0), axis=1) < MIN_CLICK_GAP_PX
+        for i in np.nonzero(close)[0]:
+            for j in (i, i + 1):
+                if 0 < j < len(c) - 1:
+                    c[j] = clicked[j]
     return c
 
 

@@ -63,6 +63,9 @@ def test_waypoints_move_onto_the_path_and_the_ends_stay() -> None:
     clicks = np.array([[1.0, 3.0], [52.0, -2.0], [99.0, 1.0]])
     on = clicks_on_path(clicks, path)  # the ends stay as clicked
     np.testing.assert_allclose(on, [[1.0, 3.0], [52.0, 0.0], [99.0, 1.0]])
+    # two waypoints the path passes at one place stay as clicked
+    twins = np.array([[1.0, 3.0], [52.0, -9.0], [52.0, 9.0], [99.0, 1.0]])
+    np.testing.assert_allclose(clicks_on_path(twins, path), twins)
 
 
 @pytest.fixture(scope="module")
