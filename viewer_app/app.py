@@ -13,6 +13,7 @@ from __future__ import annotations
 import contextlib
 import io
 import logging
+import re
 import tempfile
 import threading
 import time
@@ -53,6 +54,17 @@ __all__ = ["ViewerApp", "EXPORT_KINDS"]
 log = logging.getLogger(__name__)
 
 SNAP_MAX_PX = 8.0
+MAX_TOASTS = 3  # notifications on a page at once
+
+
+def public_paths(text: str, private_dir: str) -> str:
+    """``text`` with the viewer's private folder of uploads left out: an uploaded file is
+    named by its own name (``<private>/a-123/x.dcm`` -> ``x.dcm``), an uploaded seeds
+    file as such."""
+    root = re.escape(str(private_dir).rstrip("/"))
+    text = re.sub(root + r"/seeds-\d+\.json", "the uploaded seeds file", text)
+    text = re.sub(root + r"/[ab]-\d+/", "", text)
+    return text.replace(str(private_dir), "(uploads)")
 
 FloatArray = NDArray[np.float64]
 
@@ -106,6 +118,7 @@ class ViewerApp(MarkEditing, RunCommands):
         self.intensity = {"a": "auto", "b": "auto"}  # ReconstructionOptions.intensity_a/b
         self._autosave_arg = autosave_path
         self.notifications: list[tuple[str, str, str]] = []  # (level, title, body)
+        self._toasts: dict[int, list] = {}  # client id -> its notifications, oldest first
         self.last_click_ms: float = float("nan")
         self.clicks_handled = 0  # image clicks the server has finished with (marks or not)
         self.reconstruction: Result | None = None  # one segment's, or a tree's (all segments)
@@ -211,7 +224,10 @@ class ViewerApp(MarkEditing, RunCommands):
     def notify(
         self, title: str, body: str, level: str = "info", client: object | None = None
     ) -> None:
-        """Show a notification (to ``client``, or every connected client) and log it."""
+        """Show a notification (to ``client``, or every connected client) and log it. An
+        uploaded file is named by its own name, not by the private folder it is kept in;
+        at most :data:`MAX_TOASTS` stay on a page (the oldest goes)."""
+        body = public_paths(body, self._tmpdir.name)
         self.notifications.append((level, title, body))
         color = {"error": "red", "warning": "yellow", "info": "blue", "success": "green"}[level]
         clients = [client] if client is not None else list(self.server.get_clients().values())
@@ -220,7 +236,11 @@ class ViewerApp(MarkEditing, RunCommands):
         seconds = 8.0 if level in ("error", "warning") else 4.0
         for c in clients:
             try:
-                c.add_notification(title, body, color=color, auto_close_seconds=seconds)
+                shown = self._toasts.setdefault(c.client_id, [])
+                shown.append(c.add_notification(title, body, color=color,
+                                                auto_close_seconds=seconds))
+                while len(shown) > MAX_TOASTS:  # they piled up over view A
+                    shown.pop(0).remove()
             except Exception:  # a client that went away must not break the app
                 log.debug("notification to a closed client", exc_info=True)
 

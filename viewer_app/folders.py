@@ -67,7 +67,7 @@ class Refreshing:
 class ViewControls:
     """One view's widgets, spread over three folders (Case, Open other files, Window / level)."""
 
-    frame: viser.GuiSliderHandle  # 0-based frame of a cine run; hidden for one frame
+    frame: viser.GuiSliderHandle  # 1-based frame number of a cine run; hidden for one frame
     path: viser.GuiTextHandle
     upload: viser.GuiUploadButtonHandle
     level: viser.GuiSliderHandle
@@ -208,13 +208,14 @@ def case_folder(gui: viser.GuiApi, app: PageCommands, refreshing: Refreshing) ->
 def _frame_slider(
     gui: viser.GuiApi, app: PageCommands, refreshing: Refreshing, key: str
 ) -> viser.GuiSliderHandle:
-    slider = gui.add_slider(f"Frame {key.upper()}", 0, 1, 1, 0, visible=False)
+    # 1-based, as the case table and DICOM's frame numbers count (issue 46: it was 0-based)
+    slider = gui.add_slider(f"Frame {key.upper()}", 1, 2, 1, 1, visible=False)
 
     @slider.on_update
     def _(event: viser.GuiEvent) -> None:
         if refreshing.active:
             return
-        app.guard("Frame", event.client, lambda: app.set_frame(key, int(slider.value)))
+        app.guard("Frame", event.client, lambda: app.set_frame(key, int(slider.value) - 1))
 
     return slider
 

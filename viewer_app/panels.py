@@ -111,8 +111,8 @@ class Panels:
                 lvl.value, wid.value = v.level, v.width
                 fr = c.frame
                 if v.angio.n_frames > 1:
-                    fr.max = v.angio.n_frames - 1
-                    fr.value = v.angio.frame_index
+                    fr.min, fr.max = 1, v.angio.n_frames  # frame numbers, as the case table
+                    fr.value = v.angio.frame_index + 1
                     fr.visible = True
                 else:
                     fr.visible = False

@@ -54,18 +54,27 @@ def profile_plot(rec: Reconstruction, width: int = 640, height: int = 360,
         return np.stack([xs, ys], axis=-1).round().astype(np.int32)
 
     font, grey = cv2.FONT_HERSHEY_SIMPLEX, (60, 60, 60)
-    for (lo, hi), colour, label in _flagged_stretches(rec):  # behind everything else
+    bands = _flagged_stretches(rec)
+    for (lo, hi), colour, _ in bands:  # behind everything else
         a, b = px(np.array([lo, hi]), np.zeros(2))
         cv2.rectangle(img, (int(a[0]), top), (max(int(b[0]), int(a[0]) + 1), height - bottom),
                       colour, -1)
-        cv2.putText(img, label, (int(a[0]) + 2, top + 12), font, 0.38, (90, 90, 90), 1,
-                    cv2.LINE_AA)
     ends = (meas.get("lesion_start_s_mm"), meas.get("lesion_end_s_mm"))
     if all(v is not None for v in ends):
         a, b = px(np.array(ends, float), np.zeros(2))
         cv2.rectangle(img, (int(a[0]), top), (int(b[0]), height - bottom), (255, 225, 225), -1)
         for p in (a, b):
             cv2.line(img, (int(p[0]), top), (int(p[0]), height - bottom), (220, 60, 60), 1)
+    titles: list[tuple[int, int, int]] = []  # (x0, x1, row) of the band titles written
+    for (lo, _), _, label in bands:
+        x = int(px(np.array([lo]), np.zeros(1))[0, 0]) + 2
+        w = cv2.getTextSize(label, font, 0.38, 1)[0][0]
+        row = 0  # the first row where it clears the titles before it (bands side by side)
+        while any(r == row and x < x1 + 4 and x0 < x + w + 4 for x0, x1, r in titles):
+            row += 1
+        titles.append((x, x + w, row))
+        cv2.putText(img, label, (x, top + 12 + 12 * row), font, 0.38, (90, 90, 90), 1,
+                    cv2.LINE_AA)
     cv2.rectangle(img, (left, top), (width - right, height - bottom), (120, 120, 120), 1)
     y_step = _nice_step(ymax, 5)
     for yv in np.arange(0.0, ymax + 1e-9, y_step):  # axis ticks at round values

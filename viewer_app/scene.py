@@ -34,6 +34,7 @@ import numpy as np
 import viser
 from numpy.typing import NDArray
 
+from viewer_app.placing import MLD_PLACES, label_places, name_place
 from viewer_app.results import angle_text
 
 if TYPE_CHECKING:
@@ -56,9 +57,6 @@ __all__ = [
     "draw_refusal",
     "draw_reconstruction",
     "model_placement",
-    "label_places",
-    "label_box",
-    "MARK_LABEL_WIDTH",
     "diameter_colors",
     "lesion_points",
     "automatic_marks",
@@ -262,51 +260,6 @@ def update_image(v: View) -> None:
     v.nodes.image.image = rgb_from_image(v.angio.image, v.level, v.width)
 
 
-#: Where a mark's label goes (offset from the mark in scene units, anchor): below right;
-#: for a second mark on the same spot above right, for a third on the left.
-LABEL_PLACES = ((np.array([0.008, 0.008, 0.0]), "top-left"),
-                (np.array([0.008, -0.008, 0.0]), "bottom-left"),
-                (np.array([-0.008, 0.0, 0.0]), "center-right"))
-
-
-#: A label's size on the page in scene units (an image is 1 wide): a mark's label (a few
-#: characters) and the height of every label, as measured on the browser tests'
-#: screenshots.
-MARK_LABEL_WIDTH, LABEL_HEIGHT = 0.045, 0.03
-
-
-def label_box(at: FloatArray, anchor: str, width: float) -> FloatArray:
-    """The box (x0, x1, y0, y1) of a label of ``width`` placed at ``at`` (2,) by its
-    ``anchor`` (viser's "top-left", ..., "center-right"; y grows downwards)."""
-    vertical, horizontal = anchor.split("-")
-    x0 = at[0] - (width if horizontal == "right" else 0.0)
-    y0 = at[1] - {"top": 0.0, "center": LABEL_HEIGHT / 2, "bottom": LABEL_HEIGHT}[vertical]
-    return np.array([x0, x0 + width, y0, y0 + LABEL_HEIGHT])
-
-
-def label_places(pts: FloatArray) -> list[tuple[FloatArray, str]]:
-    """Where the label of each mark at ``pts`` (M, 3) goes (:data:`LABEL_PLACES`), in
-    order: the first place whose label clears the labels placed before it (two waypoints
-    a few pixels apart, a branch's start on its bifurcation landmark), else the one that
-    overlaps them least."""
-    placed: list[FloatArray] = []
-    out = []
-    for p in np.asarray(pts, dtype=float).reshape(-1, 3):
-        boxes, overlaps = [], []
-        for offset, anchor in LABEL_PLACES:
-            box = label_box(p[:2] + offset[:2], anchor, MARK_LABEL_WIDTH)
-            boxes.append(box)
-            overlaps.append(sum(max(0.0, min(box[1], b[1]) - max(box[0], b[0]))
-                                * max(0.0, min(box[3], b[3]) - max(box[2], b[2]))
-                                for b in placed))
-            if overlaps[-1] == 0.0:
-                break
-        k = int(np.argmin(overlaps))
-        placed.append(boxes[k])
-        out.append(LABEL_PLACES[k])
-    return out
-
-
 def draw_marks(scene: viser.SceneApi, views: Mapping[str, View], st: MarkState) -> None:
     """Marks, labels, selection and the epipolar line of the selected mark."""
     sel = st.selected
@@ -391,11 +344,12 @@ def draw_lesion_marks(scene: viser.SceneApi, views: Mapping[str, View], rec: Rec
                               np.array([MARKER_COLORS[n] for n in names], np.uint8),
                               point_size=0.018, point_shape="diamond", point_shading="flat")
         # Only the MLD is named: the lesion ends (blue) sit a few mm from it and their
-        # names would cover the vessel.
+        # names would cover the vessel. Its name goes where it clears the marks and
+        # their labels ("MLD" printed over a landmark's "F2").
         p = local[names.index("MLD")]
+        offset, anchor = name_place(p[:2], "MLD", v.nodes.marks.points, MLD_PLACES)
         scene.add_label(f"{root}/lesion_labels/mld", "MLD", font_screen_scale=0.8,
-                        position=tuple(p + np.array([-0.015, 0.0, 0.0])),
-                        anchor="center-right")
+                        position=(*(p[:2] + offset), p[2]), anchor=anchor)
     T = model.T_scene_from_world
     mld_scene = T[:3, :3] @ pts["MLD"] + T[:3, 3]
     scene.add_icosphere("/model/mld", radius=0.02, color=MARKER_COLORS["MLD"],

@@ -23,8 +23,8 @@ import numpy as np
 import viser
 from numpy.typing import NDArray
 
+from viewer_app.placing import name_place
 from viewer_app.scene import (
-    MARK_LABEL_WIDTH,
     MODEL_SIZE,
     OVERLAY_Z,
     ModelNodes,
@@ -36,8 +36,6 @@ from viewer_app.scene import (
     draw_lesion_marks,
     draw_reconstruction,
     draw_refusal,
-    label_box,
-    label_places,
     model_placement,
     overlay_name,
     polyline_segments,
@@ -85,15 +83,6 @@ BRANCH_COLORS: tuple[tuple[str, tuple[int, int, int]], ...] = (
 FADE, FADE_TO = 0.6, (210, 210, 210)  # the mesh of the branches not shown: paler
 CENTERLINE_SHADE = 0.55  # a branch's 3D centerline: its colour darkened to this fraction
 THIN_PX, THICK_PX, SHOWN_PX = 1.2, 2.5, 4.5  # trace, back-projection, the shown branch's
-#: Where a branch's name may go beside its distal end on an image (offset in scene units,
-#: anchor), above right first (the end mark's own label is below right).
-NAME_PLACES = ((np.array([0.01, -0.01]), "bottom-left"), (np.array([-0.01, -0.01]), "bottom-right"),
-               (np.array([-0.01, 0.01]), "top-right"), (np.array([0.01, 0.01]), "top-left"))
-#: Per character of a branch's name on the page, in scene units (an image is 1 wide), and
-#: a mark's dot's radius, as measured on the browser tests' screenshots.
-NAME_CHAR, DOT_RADIUS = 0.012, 0.008
-
-
 def branch_color(k: int) -> tuple[int, int, int]:
     """RGB of branch (segment) ``k``."""
     return BRANCH_COLORS[k % len(BRANCH_COLORS)][1]
@@ -237,28 +226,6 @@ def draw_out_of_date(scene: viser.SceneApi, views: Mapping[str, View],
         scene.add_label("/model/out_of_date", "⚠ OUT OF DATE\nthe marks changed after this "
                         "model:\npress Reconstruct", position=(float(at[0]), float(at[1]), 0.0),
                         anchor="center-right")
-
-
-def name_place(end_xy: NDArray[np.float64], name: str, marks_xyz: NDArray
-               ) -> tuple[NDArray[np.float64], str]:
-    """Where a branch's name goes beside its distal end ``end_xy`` (2,) on an image whose
-    marks are at ``marks_xyz`` (M, 3) (scene units, the image's frame): the first of
-    :data:`NAME_PLACES` whose text clears every mark's dot and label (placed as
-    scene.draw_marks places them), else the one that meets fewest. Returns (offset (2,),
-    anchor)."""
-    marks = np.asarray(marks_xyz, dtype=float).reshape(-1, 3)
-    boxes = [np.array([x - DOT_RADIUS, x + DOT_RADIUS, y - DOT_RADIUS, y + DOT_RADIUS])
-             for x, y in marks[:, :2]]
-    boxes += [label_box(p[:2] + offset[:2], anchor, MARK_LABEL_WIDTH)
-              for p, (offset, anchor) in zip(marks, label_places(marks), strict=True)]
-    taken = np.array(boxes).reshape(-1, 4)
-    hits = []
-    for offset, anchor in NAME_PLACES:
-        x0, x1, y0, y1 = label_box(end_xy + offset, anchor, NAME_CHAR * len(name))
-        hits.append(int(np.count_nonzero((taken[:, 1] > x0) & (taken[:, 0] < x1)
-                                         & (taken[:, 3] > y0) & (taken[:, 2] < y1))))
-    offset, anchor = NAME_PLACES[int(np.argmin(hits))]
-    return np.asarray(offset, dtype=float), anchor
 
 
 def _shade(rgb: tuple[int, int, int], fraction: float) -> tuple[int, int, int]:

@@ -291,10 +291,12 @@ def test_cine_frame_slider_and_missing_geometry(tmp_path: Path) -> None:
                     port=0, autosave_path=tmp_path / "auto.json")
     try:
         slider = app.panels.case.views["a"].frame
-        assert slider.visible and slider.max == 8
-        assert slider.value == app.views["a"].angio.frame_index  # the loader's chosen frame
+        # frame numbers from 1, as the case table says them (issue 46: it was 0-based)
+        assert slider.visible and (slider.min, slider.max) == (1, 9)
+        assert slider.value == app.views["a"].angio.frame_index + 1  # the loader's choice
+        assert f"| frame | {int(slider.value)}/9 |" in app.panels.case.info.content
         before = app.views["a"].nodes.image.image.copy()
-        slider.value = 1  # as if the user dragged it
+        slider.value = 2  # as if the user dragged it to frame 2
         assert app.views["a"].angio.frame_index == 1
         assert not np.array_equal(app.views["a"].nodes.image.image, before)
         # A real clinical cine without SID/SOD/spacing: an error notification, the app lives on,
@@ -584,3 +586,53 @@ def test_a_mark_is_moved_by_a_drag_in_one_undo_step_and_the_selected_one_deleted
     assert app.undo() and app.state.mark_by_id(mark.id) == mark
     app.catheter.pending = ("a", 6.0)  # a catheter measurement waits: drags move no mark
     assert app.grab_mark("a", *mark.point_px) is None
+
+
+def test_the_mld_s_name_on_an_image_clears_the_marks_labels(
+        app: ViewerApp, demo_case: dict[str, Path]) -> None:
+    """Issue 46: "MLD" printed over a landmark's "F2" next to it; its name now goes where
+    it clears every mark's dot and label on both images."""
+    from recon.geometry import ViewGeometry
+    from viewer_app.placing import (
+        DOT_RADIUS,
+        MARK_LABEL_WIDTH,
+        NAME_CHAR,
+        label_box,
+        label_places,
+    )
+
+    truth = json.loads(Path(demo_case["a"]).with_name("truth.json").read_text())
+
+    # a landmark on the MLD itself in both views: the place the issue saw
+    X = np.asarray(truth["segment"]["X_world"], dtype=float)
+    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(X, axis=0), axis=1))])
+    at = X[int(np.argmin(np.abs(s - truth["stenosis"]["s_mm"])))][None]
+    app.set_mode("feature")
+    app.click("a", *ViewGeometry.from_dict(truth["view_a"]).project(at)[0])
+    app.click("b", *ViewGeometry.from_dict(truth["view_b_true"]).project(at)[0])
+    assert app.reconstruct() is not None, app.notifications[-3:]
+    for key in ("a", "b"):
+        label = app.server.scene.get_handle_by_name(f"/over_{key}/lesion_labels/mld")
+        pts = np.asarray(app.views[key].nodes.marks.points, dtype=float)
+        boxes = [np.array([x - DOT_RADIUS, x + DOT_RADIUS, y - DOT_RADIUS, y + DOT_RADIUS])
+                 for x, y in pts[:, :2]]
+        boxes += [label_box(p[:2] + off[:2], anchor, MARK_LABEL_WIDTH)
+                  for p, (off, anchor) in zip(pts, label_places(pts), strict=True)]
+        mld = label_box(np.asarray(label.position)[:2], label.anchor, NAME_CHAR * 3)
+        hits = [b for b in boxes
+                if b[1] > mld[0] and b[0] < mld[1] and b[3] > mld[2] and b[2] < mld[3]]
+        assert not hits, (key, mld, hits)
+
+
+def test_an_upload_is_named_by_its_own_name_not_the_private_folder(app: ViewerApp) -> None:
+    """Issue 46: a toast showed the viewer's internal temporary path of an upload."""
+    from viewer_app.app import public_paths
+
+    assert not app.open_upload("b", "scan.dcm", b"not a DICOM file")
+    level, _, body = app.notifications[-1]
+    assert level == "error" and "scan.dcm" in body
+    assert app._tmpdir.name not in body and "coronary3d-viewer-" not in body
+    private = "/tmp/coronary3d-viewer-x1"
+    assert public_paths(f"{private}/a-17/IM1.dcm: bad", private) == "IM1.dcm: bad"
+    assert public_paths(f"{private}/seeds-99.json: bad", private) == \
+        "the uploaded seeds file: bad"

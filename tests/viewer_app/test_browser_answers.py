@@ -216,6 +216,12 @@ def test_two_patients_wait_for_a_confirmation_the_page_shows(
             b.page.get_by_text("name different patients: open two views").first.wait_for(
                 state="visible", timeout=10_000)
             b.shot("answers_8_two_patients_refused.png")
+            for _ in range(4):  # refused again and again: the notes do not pile up
+                _press(b, "Reconstruct")
+                b.page.wait_for_timeout(300)
+            b.page.wait_for_timeout(600)
+            toasts = b.page.locator(".mantine-Notification-root").count()
+            assert toasts <= 3, toasts
             b.page.get_by_role("button", name="They are one patient's views").first.click()
             wait_for(lambda: app.patients_confirmed, 10, "the confirmation")
             assert _reconstructed(b, app, len(app.notifications))

@@ -80,3 +80,21 @@ def test_the_area_chart_is_drawn_below_when_the_profile_has_areas() -> None:
     img = profile_plot(rec, width=440, height=440)
     rows = np.flatnonzero(np.any(np.all(img == AREA, axis=-1), axis=1))
     assert rows.size and rows.min() > 0.6 * 440  # in the lower third
+
+
+def test_band_titles_side_by_side_go_on_rows_of_their_own() -> None:
+    """Issue 46: the titles of two shaded stretches a few mm apart printed over each other
+    ("A overlapped" on "branch"); the second goes a row lower."""
+    rec = _rec(smooth=True)
+    stretches = {"a": [(10.0, 14.0)], "b": [(11.0, 15.0)]}
+    rec.centerline_3d = SimpleNamespace(overlap_stretches_mm=lambda view: stretches[view])
+    img = profile_plot(rec)
+    left, right, top = 56, 14, 26
+    x = round(left + 11.0 / 50.0 * (640 - left - right)) + 2
+
+    def dark_rows(y0: int, y1: int) -> int:  # title ink (grey 90) in a row band
+        ink = np.all(img[y0:y1, x:x + 60] <= 120, axis=-1)
+        return int(np.count_nonzero(ink))
+
+    assert dark_rows(top + 3, top + 14) > 20  # "A overlapped" on the first row
+    assert dark_rows(top + 15, top + 26) > 20  # "B overlapped" on the second

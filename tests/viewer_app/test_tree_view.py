@@ -184,7 +184,7 @@ def test_new_branch_from_landmark_in_the_app(tree_app: ViewerApp) -> None:
 def test_a_branch_name_goes_where_no_mark_or_its_label_lies() -> None:
     """Beside a distal end with only its own mark, the name goes above right; with a
     landmark and its label there (as "long arc" over D1 / F2 in IM8), to a clear side."""
-    from viewer_app.tree_view import NAME_PLACES, name_place
+    from viewer_app.placing import NAME_PLACES, name_place
 
     end = np.array([0.2, 0.1])
     alone = np.array([[0.2, 0.1, 0.0]])  # the branch's own distal mark
@@ -235,7 +235,7 @@ def test_the_labels_of_marks_a_few_pixels_apart_do_not_cover_each_other() -> Non
     """Two waypoints 5 px apart (about 0.01 scene units) once drew their labels "1w1" and
     "1w2" over each other: the second label goes where it clears the first; a mark far
     away keeps the first place; three marks on one spot use all three places."""
-    from viewer_app.scene import LABEL_PLACES, MARK_LABEL_WIDTH, label_box, label_places
+    from viewer_app.placing import LABEL_PLACES, MARK_LABEL_WIDTH, label_box, label_places
 
     pts = np.array([[0.0, 0.0, 0.0], [0.01, 0.004, 0.0], [0.4, 0.3, 0.0],
                     [0.4, 0.3, 0.0], [0.4, 0.3, 0.0]])
