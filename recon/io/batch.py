@@ -43,6 +43,8 @@ from recon.io.output_set import _alive
 __all__ = [
     "CASE_RECORD",
     "RESULT_COLUMNS",
+    "FFR_KEYS",
+    "ffr_columns",
     "run_case",
     "batch_lock",
     "sweep_leftovers",
@@ -74,6 +76,9 @@ MEASUREMENT_KEYS = (
     "lesion_length_mm",
     "segment_length_mm",
 )
+#: The FFR (recon.lumen.ffr; a model estimate for research) at the segment's distal end and
+#: its 95 % interval, from report.json's ``ffr`` block; empty where it was not computed.
+FFR_KEYS = ("ffr_distal", "ffr_ci95_lo", "ffr_ci95_hi")
 
 RESULT_COLUMNS = (
     "id",
@@ -83,6 +88,7 @@ RESULT_COLUMNS = (
     "branch",
     "parent",
     *MEASUREMENT_KEYS,
+    *FFR_KEYS,
     "calibration_error_before_px",
     "calibration_error_after_px",
     "calibration_rotation_deg",
@@ -190,6 +196,7 @@ def reconstruct_case(case: BatchCase, formats: tuple[str, ...], sr: bool,
     cal = report["calibration"]
     record: dict = dict.fromkeys(RESULT_COLUMNS)
     record.update({key: report["measurements"][key] for key in MEASUREMENT_KEYS})
+    record.update(ffr_columns(report))
     record.update(
         id=case.id,
         status="done",
@@ -205,12 +212,21 @@ def reconstruct_case(case: BatchCase, formats: tuple[str, ...], sr: bool,
     entries = report.get("branches") or [dict(report, branch_id=options.segment, parent=None)]
     record["branches"] = [
         {"branch_id": e["branch_id"], "branch": e["inputs"]["segment"], "parent": e["parent"],
-         **{key: e["measurements"][key] for key in MEASUREMENT_KEYS}}
+         **{key: e["measurements"][key] for key in MEASUREMENT_KEYS}, **ffr_columns(e)}
         for e in entries
     ]
     record["worker_peak_rss_mb"] = round(
         resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1)  # this case's process
     return record, files
+
+
+def ffr_columns(entry: dict) -> dict:
+    """``ffr_distal``, ``ffr_ci95_lo``, ``ffr_ci95_hi`` of one report.json entry (the top
+    level or one of ``branches``): its ``ffr`` block's ``distal`` and ``ci95``; None (an
+    empty cell) where the FFR was not computed or has no interval."""
+    block = entry.get("ffr") or {}
+    ci = block.get("ci95") or (None, None)
+    return {"ffr_distal": block.get("distal"), "ffr_ci95_lo": ci[0], "ffr_ci95_hi": ci[1]}
 
 
 def _file_bytes(path: str) -> int:
@@ -362,7 +378,7 @@ def result_rows(records: list[dict]) -> list[dict]:
         for branch in branches:
             row = {k: v for k, v in record.items() if k != "branches"}
             row.update({k: branch[k] for k in ("branch_id", "branch", "parent",
-                                               *MEASUREMENT_KEYS) if k in branch})
+                                               *MEASUREMENT_KEYS, *FFR_KEYS) if k in branch})
             rows.append(row)
     return rows
 

@@ -10,6 +10,7 @@ from support import DEMO
 
 from recon.io.batch import (
     CASE_RECORD,
+    FFR_KEYS,
     RESULT_COLUMNS,
     failed_record,
     read_record,
@@ -58,3 +59,48 @@ def test_results_csv_and_parquet_hold_one_row_per_case(tmp_path):
     assert table[0]["mld_mm"] == 1.25 and table[0]["calibration_iterations"] == 7
     assert table[1]["mld_mm"] is None and table[1]["status"] == "failed"
     assert json.loads(json.dumps(table))  # plain values
+
+
+def test_the_ffr_columns_are_each_branchs_and_empty_where_it_was_not_computed(tmp_path):
+    """ffr_distal, ffr_ci95_lo, ffr_ci95_hi per branch row; a branch without an FFR (or
+    without its interval) and a failed case have empty cells (CSV) and nulls (Parquet)."""
+    assert RESULT_COLUMNS[RESULT_COLUMNS.index("segment_length_mm") + 1:][:3] == FFR_KEYS
+    done = dict.fromkeys(RESULT_COLUMNS, None) | {"id": "t", "status": "done", "error": ""}
+    done["branches"] = [
+        {"branch_id": 0, "branch": "main", "parent": None, "mld_mm": 1.4,
+         "ffr_distal": 0.8587, "ffr_ci95_lo": 0.8141, "ffr_ci95_hi": 0.9034},
+        {"branch_id": 1, "branch": "D1", "parent": "main", "mld_mm": 1.1,
+         "ffr_distal": None, "ffr_ci95_lo": None, "ffr_ci95_hi": None},
+        {"branch_id": 2, "branch": "D2", "parent": "main", "mld_mm": 1.0,
+         "ffr_distal": 0.91, "ffr_ci95_lo": None, "ffr_ci95_hi": None},
+    ]
+    write_results(tmp_path, [done, failed_record("f", "f.dcm: no such file")])
+    rows = list(csv.DictReader((tmp_path / "results.csv").open()))
+    assert [[r[k] for k in FFR_KEYS] for r in rows] == [
+        ["0.8587", "0.8141", "0.9034"], ["", "", ""], ["0.91", "", ""], ["", "", ""]]
+    table = pq.read_table(tmp_path / "results.parquet")
+    assert all(str(table.schema.field(k).type) == "double" for k in FFR_KEYS)
+    assert [[r[k] for k in FFR_KEYS] for r in table.to_pylist()] == [
+        [0.8587, 0.8141, 0.9034], [None] * 3, [0.91, None, None], [None] * 3]
+
+
+def test_a_done_cases_ffr_columns_are_its_report_json_ffr(tmp_path):
+    """The demo case reconstructed for real in its own process (run_case): the record and
+    the table carry report.json's ffr.distal and ffr.ci95."""
+    from recon.io.batch import ffr_columns
+
+    case = BatchCase(id="demo", a=str(DEMO / "a.dcm"), b=str(DEMO / "b.dcm"),
+                     seeds=str(DEMO / "seeds.json"), line=2)
+    record = run_case(case, str(tmp_path / "out"), ("stl",), sr=False)
+    assert record["status"] == "done", record["error"]
+    report = json.loads((tmp_path / "out" / "demo" / "report.json").read_text())
+    block = report["ffr"]
+    assert block is not None and block["ci95"] is not None  # the demo has its FFR
+    assert 0.0 < block["distal"] <= 1.0 and block["ci95"][0] <= block["distal"]
+    expected = [block["distal"], *block["ci95"]]
+    assert [record[k] for k in FFR_KEYS] == expected
+    assert [record["branches"][0][k] for k in FFR_KEYS] == expected
+    write_results(tmp_path, [record])
+    (row,) = csv.DictReader((tmp_path / "results.csv").open())
+    assert [float(row[k]) for k in FFR_KEYS] == expected
+    assert ffr_columns({"ffr": None}) == dict.fromkeys(FFR_KEYS)  # not computed

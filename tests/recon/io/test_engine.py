@@ -200,6 +200,9 @@ def test_a_tree_case_is_reconstructed_whole_with_a_row_per_branch(tmp_path):
     for row, branch in zip(rows[:2], report["branches"], strict=True):
         assert float(row["mld_mm"]) == branch["measurements"]["mld_mm"]
         assert float(row["segment_length_mm"]) == branch["measurements"]["segment_length_mm"]
+        ffr = branch["ffr"]  # the FFR solved over the tree, each branch's own
+        assert [float(row[k]) for k in ("ffr_distal", "ffr_ci95_lo", "ffr_ci95_hi")] == \
+            [ffr["distal"], *ffr["ci95"]]
     assert rows[0]["calibration_error_after_px"] == rows[1]["calibration_error_after_px"]
     branch_ids = {int(v) for v in
                   np.loadtxt(out / "tree" / "centerline.csv", delimiter=",", skiprows=1)[:, -1]}
