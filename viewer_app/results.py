@@ -33,6 +33,7 @@ __all__ = [
     "clinical_markdown",
     "close_views_warning",
     "lesion_measurements",
+    "lesions_lines",
     "fmt",
     "info_markdown",
     "input_warning_lines",
@@ -396,8 +397,33 @@ def clinical_markdown(rec: Reconstruction, lesion: dict[str, float] | None = Non
                     f"(foreshortening {best.foreshortening_pct:.1f} %, the segment over "
                     f"itself {best.overlap_pct:.0f} %; other vessels are not traced: check "
                     "that none crosses it there) |")
+    if lesion is None:
+        rows += lesions_lines(rec)
     rows += _caveats(rec, v)
     return "\n".join(rows)
+
+
+def lesions_lines(rec: Reconstruction) -> list[str]:
+    """Every lesion of the segment (recon.lumen.lesions: every narrowing that passes the
+    lesion criterion, proximal to distal), each with its MLD, % diameter stenosis and
+    length and their 95 % intervals, and whether the most severe stands out (the table
+    above is of that one); [] for a result without them."""
+    report = getattr(rec, "lesions", None)
+    if report is None:
+        return []
+    lines = ["", f"**Lesions**: {report.summary()}."]
+    if len(report.lesions) < 2:
+        return lines
+    lines += ["", "| lesion | MLD at | MLD | % DS | length |", "| --- | --- | --- | --- | --- |"]
+    for k, les in enumerate(report.lesions):
+        n, ci = les.narrowing, dict(les.ci95)
+        mark = " (table above)" if k == report.primary else ""
+        lines.append(
+            f"| {les.number}{mark} | {n.mld_s_mm:.1f} mm | "
+            f"{_with_ci(f'{n.mld_mm:.2f} mm', 'mld_mm', ci, 2)} | "
+            f"{_with_ci(f'{n.diameter_stenosis_pct:.0f} %', 'diameter_stenosis_pct', ci, 0)} | "
+            f"{_with_ci(f'{n.length_mm:.1f} mm', 'length_mm', ci, 1)} |")
+    return lines
 
 
 def _caveats(rec: Reconstruction, v: dict[str, float]) -> list[str]:

@@ -16,6 +16,7 @@ from viewer_app.results import (
     fmt,
     info_markdown,
     lesion_measurements,
+    lesions_lines,
     marks_markdown,
     results_markdown,
     warnings_markdown,
@@ -232,3 +233,21 @@ def test_the_bifurcation_table_says_when_a_branch_origin_is_doubtful() -> None:
     table = bifurcations_markdown(SimpleNamespace(bifurcations=(fine, doubt)))
     assert "- ⚠ LAD/D1: in view B the trace of D1 runs 80 px along LAD" in table
     assert table.count("⚠") == 1
+
+
+def test_every_lesion_is_listed_with_its_intervals() -> None:
+    """Issue 46 item 5 on the page: every narrowing that passes the lesion criterion,
+    numbered, with MLD, % DS and length and their 95 % intervals (recon.lumen.lesions)."""
+    def lesion(number: int, s_mm: float, mld: float, ds: float) -> SimpleNamespace:
+        n = SimpleNamespace(mld_s_mm=s_mm, mld_mm=mld, diameter_stenosis_pct=ds, length_mm=6.0)
+        return SimpleNamespace(number=number, narrowing=n,
+                               ci95={"mld_mm": (mld - 0.2, mld + 0.2),
+                                     "diameter_stenosis_pct": (ds - 8, ds + 8)})
+
+    report = SimpleNamespace(lesions=(lesion(1, 20.0, 1.6, 45.0), lesion(2, 48.0, 1.4, 52.0)),
+                             primary=1, summary=lambda: "2 lesions; no single most severe")
+    lines = lesions_lines(SimpleNamespace(lesions=report))
+    assert lines[1] == "**Lesions**: 2 lesions; no single most severe."
+    assert "| 1 | 20.0 mm | 1.60 mm (1.40–1.80) | 45 % (37–53) | 6.0 mm |" in lines
+    assert "| 2 (table above) | 48.0 mm | 1.40 mm (1.20–1.60) | 52 % (44–60) | 6.0 mm |" in lines
+    assert lesions_lines(SimpleNamespace()) == []
