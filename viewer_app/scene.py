@@ -335,22 +335,37 @@ def draw_lesion_marks(scene: viser.SceneApi, views: Mapping[str, View], rec: Rec
     """MLD and lesion ends on both angiograms (projected) and the MLD on the model."""
     pts = lesion_points(rec, marks_s_mm)
     names = list(pts)
+    scene.remove_by_name("/model/lesions")  # the other lesions' of the branch shown before
     P = np.array([pts[n] for n in names])
     for key, geom in (("a", rec.view_a), ("b", rec.view_b)):
         v, root = views[key], overlay_name(key)
         scene.remove_by_name(f"{root}/lesion_labels")
         local = v.local_from_px(geom.project(P), z=OVERLAY_Z * 1.8)
         scene.add_point_cloud(f"{root}/lesion", local.astype(np.float32),
-                              np.array([MARKER_COLORS[n] for n in names], np.uint8),
+                              np.array([MARKER_COLORS.get(n, MARKER_COLORS["MLD"])
+                                        for n in names], np.uint8),
                               point_size=0.018, point_shape="diamond", point_shading="flat")
-        # Only the MLD is named: the lesion ends (blue) sit a few mm from it and their
-        # names would cover the vessel. Its name goes where it clears the marks and
-        # their labels ("MLD" printed over a landmark's "F2").
-        p = local[names.index("MLD")]
-        offset, anchor = name_place(p[:2], "MLD", v.nodes.marks.points, MLD_PLACES)
-        scene.add_label(f"{root}/lesion_labels/mld", "MLD", font_screen_scale=0.8,
-                        position=(*(p[:2] + offset), p[2]), anchor=anchor)
+        # Only the MLDs are named (the other lesions' as L2, L3, ...): the lesion ends
+        # (blue) sit a few mm from them and their names would cover the vessel. A name
+        # goes where it clears the marks and their labels ("MLD" printed over "F2").
+        for k, name in enumerate(names):
+            if name in ("lesion start", "lesion end"):
+                continue
+            p = local[k]
+            offset, anchor = name_place(p[:2], name, v.nodes.marks.points, MLD_PLACES)
+            scene.add_label(f"{root}/lesion_labels/{name.replace(' ', '_').lower()}", name,
+                            font_screen_scale=0.8, position=(*(p[:2] + offset), p[2]),
+                            anchor=anchor)
     T = model.T_scene_from_world
+    for name in names:  # the other lesions' MLDs on the model, smaller
+        if name not in ("MLD", "lesion start", "lesion end"):
+            at = T[:3, :3] @ pts[name] + T[:3, 3]
+            scene.add_icosphere(f"/model/lesions/{name}", radius=0.014,
+                                color=MARKER_COLORS["MLD"], position=tuple(at),
+                                cast_shadow=False, receive_shadow=False)
+            scene.add_label(f"/model/lesions/{name}_label", name,
+                            position=tuple(at + np.array([0.025, 0.0, -0.03])),
+                            anchor="center-left")
     mld_scene = T[:3, :3] @ pts["MLD"] + T[:3, 3]
     scene.add_icosphere("/model/mld", radius=0.02, color=MARKER_COLORS["MLD"],
                         position=tuple(mld_scene), cast_shadow=False, receive_shadow=False)
@@ -369,12 +384,17 @@ def lesion_points(rec: Reconstruction, marks_s_mm: Mapping[str, float]) -> dict[
 
 
 def automatic_marks(rec: Reconstruction) -> dict[str, float]:
-    """Arc lengths (mm) of the MLD and, when a lesion was found, of its two ends."""
+    """Arc lengths (mm) of the MLD and, when a lesion was found, of its two ends; and the
+    MLD of every other lesion (recon.lumen.lesions), named "L2", "L3", ... by number."""
     m = rec.measurements
     out = {"MLD": float(m.mld_s_mm)}
     if m.has_lesion:
         out["lesion start"] = float(m.lesion_start_s_mm)
         out["lesion end"] = float(m.lesion_end_s_mm)
+    report = getattr(rec, "lesions", None)
+    for k, les in enumerate(getattr(report, "lesions", ())):
+        if k != report.primary:
+            out[f"L{les.number}"] = float(les.narrowing.mld_s_mm)
     return out
 
 

@@ -250,3 +250,23 @@ def test_the_labels_of_marks_a_few_pixels_apart_do_not_cover_each_other() -> Non
     assert not overlap(boxes[0], boxes[1])
     assert [a for _, a in places[2:]] == [a for _, a in LABEL_PLACES]
     assert not any(overlap(boxes[i], boxes[j]) for i in (2, 3, 4) for j in (2, 3, 4) if i < j)
+
+
+def test_every_lesion_s_mld_is_marked() -> None:
+    """Issue 46 item 5: besides the MLD (and its lesion's ends), every other lesion's MLD
+    is marked on the images and the model, named L2, L3, ... by its number."""
+    from types import SimpleNamespace
+
+    from viewer_app.scene import automatic_marks
+
+    def lesion(number: int, s_mm: float) -> SimpleNamespace:
+        return SimpleNamespace(number=number, narrowing=SimpleNamespace(mld_s_mm=s_mm))
+
+    m = SimpleNamespace(mld_s_mm=48.0, has_lesion=True, lesion_start_s_mm=44.0,
+                        lesion_end_s_mm=52.0)
+    rec = SimpleNamespace(measurements=m, lesions=SimpleNamespace(
+        lesions=(lesion(1, 20.0), lesion(2, 48.0), lesion(3, 70.0)), primary=1))
+    assert automatic_marks(rec) == {"MLD": 48.0, "lesion start": 44.0, "lesion end": 52.0,
+                                    "L1": 20.0, "L3": 70.0}
+    assert automatic_marks(SimpleNamespace(measurements=m)) == {
+        "MLD": 48.0, "lesion start": 44.0, "lesion end": 52.0}
