@@ -15,8 +15,9 @@ Modules: :mod:`~recon.synth.presets` (the C-arm presets),
 :mod:`~recon.synth.chains` (imaging chains: detector, mapping, blur,
 scatter / glare, noise, background, bit depth), :mod:`~recon.synth.background`
 (ribs, diaphragm, table edge in mm), :mod:`~recon.synth.chain_render`
-(rendering through a chain), :mod:`~recon.synth.anatomy` (harder anatomy,
-the guiding catheter) and :mod:`~recon.synth.suites` (:func:`varied_cases`).
+(rendering through a chain, a JPEG export), :mod:`~recon.synth.anatomy`
+(harder anatomy, the guiding catheter, a pacing lead) and
+:mod:`~recon.synth.suites` (:func:`varied_cases`).
 
 Frames and conventions
 ----------------------
@@ -42,7 +43,7 @@ from __future__ import annotations
 
 from recon.synth.anatomy import ANATOMIES, ANATOMY_CYCLE, Anatomy
 from recon.synth.case import PhantomCase, PhantomError, make_phantom
-from recon.synth.chains import CHAINS, ChainDraw, ImagingChain
+from recon.synth.chains import ALL_CHAINS, CHAINS, VARIED_CHAINS, ChainDraw, ImagingChain
 from recon.synth.clicks import (
     CLICK_NOISE_PX,
     HEADER_ANGLE_ERROR_DEG,
@@ -73,6 +74,8 @@ __all__ = [
     "ImagingChain",
     "ChainDraw",
     "CHAINS",
+    "ALL_CHAINS",
+    "VARIED_CHAINS",
     "Anatomy",
     "ANATOMIES",
     "ANATOMY_CYCLE",

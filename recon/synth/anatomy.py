@@ -23,6 +23,11 @@ chain with a ``catheter`` background renders: a contrast-filled tube of 6
 or 7 F (1 F = 1/3 mm outer diameter) engaged in the ostium (the main
 vessel's proximal end), bending up towards the aortic root and leaving the
 field at the image edge.
+
+:func:`pacing_lead` draws a pacing lead (or a guide wire) for a chain with
+a ``lead`` background: a thin, dense, straight or gently curved line that
+crosses the whole field and passes a few millimetres from the clicked
+segment, as in the real clinical pairs of issue 45.
 """
 
 from __future__ import annotations
@@ -41,10 +46,13 @@ __all__ = [
     "ANATOMIES",
     "ANATOMY_CYCLE",
     "Catheter",
+    "Lead",
     "add_crossing",
+    "catheter_beside",
     "faint_fade",
     "guiding_catheter",
     "loop_crossing_views",
+    "pacing_lead",
     "resolve_anatomy",
 ]
 
@@ -64,6 +72,17 @@ FAINT_POWER = 2.0  # the fade grows as (arc fraction)^2: strongest distally
 CATHETER_DIAMETERS_MM = {6: (2.0, 0.070 * 25.4), 7: (7.0 / 3.0, 0.080 * 25.4)}
 CATHETER_BEND_MM = (20.0, 35.0)  # from the ostium's direction to the aortic direction
 CATHETER_LENGTH_MM = 320.0  # long enough to leave any field of view
+
+# Pacing lead / guide wire (pacing_lead). The figures are this benchmark's design
+# choice after the real pairs (a thin line much darker than a filled vessel), not
+# measured values: the lead's conductor coil or a wire, 0.3-0.6 mm wide.
+LEAD_RADIUS_MM = (0.15, 0.30)
+LEAD_PEAK = (0.5, 1.0)  # line integral through the lead's axis (a 3 mm vessel: about 0.3)
+LEAD_OFFSET_MM = (2.0, 6.0)  # 3D distance from the segment where it passes nearest
+LEAD_ANGLE_DEG = (10.0, 45.0)  # angle to the segment there
+LEAD_CURVATURE_PER_MM = 1.0 / 400.0  # largest curvature: gently curved
+LEAD_LENGTH_MM = 400.0  # crosses any field of view
+LEAD_MIN_FIELD_FRACTION = 0.5  # its projection inside a view is at least half the image size
 
 
 @dataclass(frozen=True)
@@ -224,6 +243,54 @@ def guiding_catheter(
                     inner_radius_mm=inner / 2)
 
 
+#: catheter_beside: the shaft (past this arc from the tip, mm) passes the segment at a
+#: centre-to-centre distance (mm in the detector plane) drawn in CATHETER_BESIDE_MM.
+CATHETER_SHAFT_FROM_MM = 30.0
+CATHETER_BESIDE_MM = (3.0, 8.0)
+CATHETER_BESIDE_DRAWS = 40
+
+
+def catheter_beside(
+    rng: np.random.Generator, main_X: FloatArray, seg_X: FloatArray,
+    views: Sequence[ViewGeometry], view_index: int,
+) -> Catheter:
+    """A guiding catheter as :func:`guiding_catheter` whose shaft runs beside the segment.
+
+    Of :data:`CATHETER_BESIDE_DRAWS` aortic directions that leave every
+    view's field, the one whose shaft (the catheter past
+    :data:`CATHETER_SHAFT_FROM_MM` of arc) comes, in ``views[view_index]``,
+    nearest to a distance drawn in :data:`CATHETER_BESIDE_MM` (detector
+    plane, centre to centre) from the segment ``seg_X`` (P, 3); the
+    plain catheter of the first draw when none leaves every field.
+    """
+    t0 = main_X[min(20, len(main_X) - 1)] - main_X[0]
+    t0 /= np.linalg.norm(t0)
+    french = int(rng.choice([6, 7]))
+    outer, inner = CATHETER_DIAMETERS_MM[french]
+    tip = main_X[0] - 0.5 * t0
+    target_mm = rng.uniform(*CATHETER_BESIDE_MM)
+    view = views[view_index]
+    seg_px = view.project(seg_X[::4])
+    shaft_from = int(CATHETER_SHAFT_FROM_MM / SAMPLE_STEP_MM)
+    best, best_miss = None, np.inf
+    for _ in range(CATHETER_BESIDE_DRAWS):
+        b = np.array([0.0, 0.0, 1.0]) + rng.normal(0.0, 0.4, 3)
+        b /= np.linalg.norm(b)
+        X = _bent_line(tip, -t0, b, rng.uniform(*CATHETER_BEND_MM), CATHETER_LENGTH_MM)
+        if b[2] < 0.8 or not all(_leaves_field(v, X) for v in views):
+            continue
+        shaft = view.project(X[shaft_from::4])
+        gap_px = np.min(np.linalg.norm(shaft[:, None, :] - seg_px[None, :, :], axis=2))
+        miss = abs(gap_px * min(view.pixel_spacing_mm) - target_mm)
+        if miss < best_miss:
+            best, best_miss = X, miss
+    if best is None:
+        best = _bent_line(tip, -t0, np.array([0.0, 0.0, 1.0]), CATHETER_BEND_MM[0],
+                          CATHETER_LENGTH_MM)
+    return Catheter(X_world=best, french=french, outer_radius_mm=outer / 2,
+                    inner_radius_mm=inner / 2)
+
+
 def _bent_line(
     start: FloatArray, a: FloatArray, b: FloatArray, bend_mm: float, length_mm: float
 ) -> FloatArray:
@@ -261,3 +328,70 @@ def _leaves_field(view: ViewGeometry, X: FloatArray) -> bool:
         return False
     c, r = view.project(X[-1:])[0]
     return not (0 <= c <= view.cols - 1 and 0 <= r <= view.rows - 1)
+
+
+@dataclass(frozen=True, eq=False)
+class Lead:
+    """A pacing lead or guide wire (world mm), a thin dense tube across the field.
+
+    Attributes
+    ----------
+    X_world : (M, 3) centerline every 0.5 mm.
+    radius_mm : the tube's radius (0.15-0.3 mm).
+    mu_per_mm : its attenuation per mm (peak line integral / diameter).
+    """
+
+    X_world: FloatArray
+    radius_mm: float
+    mu_per_mm: float
+
+
+def pacing_lead(
+    rng: np.random.Generator, seg_X: FloatArray, views: Sequence[ViewGeometry],
+    max_draws: int = 50,
+) -> Lead:
+    """A lead that passes 2-6 mm from the segment ``seg_X`` (P, 3) and crosses every view.
+
+    At a point P of the segment (30-70 % of its arc) the lead runs at 10-45
+    degrees to the segment, its nearest approach on their common
+    perpendicular; it is 400 mm long, bent in a plane with a curvature of at
+    most 1/400 per mm. A draw whose projection inside some view is shorter
+    than half the image size is drawn again (the last draw is kept).
+    """
+    i_max = len(seg_X) - 1
+    tangent = np.gradient(seg_X, axis=0)
+    radius = float(rng.uniform(*LEAD_RADIUS_MM))
+    mu = float(rng.uniform(*LEAD_PEAK)) / (2.0 * radius)
+    u = np.arange(-LEAD_LENGTH_MM / 2, LEAD_LENGTH_MM / 2 + 1e-9, SAMPLE_STEP_MM)
+    X = seg_X
+    for _ in range(max_draws):
+        i = int(round(rng.uniform(0.3, 0.7) * i_max))
+        t = tangent[i] / np.linalg.norm(tangent[i])
+        n = _unit_perpendicular(t, rng.normal(size=3))
+        a = np.deg2rad(rng.uniform(*LEAD_ANGLE_DEG))
+        w = np.cos(a) * t + np.sin(a) * n
+        m = np.cross(t, w)
+        m /= np.linalg.norm(m)
+        Q = seg_X[i] + rng.uniform(*LEAD_OFFSET_MM) * rng.choice([-1.0, 1.0]) * m
+        bend_dir = _unit_perpendicular(w, rng.normal(size=3))
+        kappa = rng.uniform(-1.0, 1.0) * LEAD_CURVATURE_PER_MM
+        X = Q + u[:, None] * w + (0.5 * kappa * u**2)[:, None] * bend_dir
+        if all(_in_field_length_px(v, X) >= LEAD_MIN_FIELD_FRACTION * max(v.rows, v.cols)
+               for v in views):
+            break
+    return Lead(X_world=X, radius_mm=radius, mu_per_mm=mu)
+
+
+def _unit_perpendicular(t: FloatArray, v: FloatArray) -> FloatArray:
+    """The unit vector along v's part perpendicular to unit t."""
+    p = v - (v @ t) * t
+    return p / np.linalg.norm(p)
+
+
+def _in_field_length_px(view: ViewGeometry, X: FloatArray) -> float:
+    """Projected length (px) of the polyline's pieces that lie inside the image."""
+    p = view.project(X)
+    inside = ((p[:, 0] >= 0) & (p[:, 0] <= view.cols - 1) & (p[:, 1] >= 0)
+              & (p[:, 1] <= view.rows - 1) & (view.depth_mm(X) > 0))
+    steps = np.linalg.norm(np.diff(p, axis=0), axis=1)
+    return float(steps[inside[1:] & inside[:-1]].sum())

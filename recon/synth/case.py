@@ -8,6 +8,13 @@ tree, the header error or the clicks. An imaging chain
 (:mod:`recon.synth.anatomy`) take a fifth stream of their own (the chain's
 values, the guiding catheter, the variant's choices); with both None a case
 is exactly the plain phantom's.
+
+A chain modelled on a clinical export (:data:`recon.synth.chains.CLINICAL_CHAINS`)
+also draws, from the same fifth stream, a guiding catheter whose shaft runs
+beside the clicked segment in the faint view and a pacing lead beside the
+segment, renders its faint view's vessels at the drawn
+grey-level contrast, and widens the table shift of view B's header error
+(the same draws, a wider range).
 """
 
 from __future__ import annotations
@@ -23,15 +30,18 @@ from recon.seeds import Seeds
 from recon.synth.anatomy import (
     Anatomy,
     Catheter,
+    Lead,
     add_crossing,
+    catheter_beside,
     faint_fade,
     guiding_catheter,
     loop_crossing_views,
+    pacing_lead,
     resolve_anatomy,
 )
 from recon.synth.chain_render import render_chain_view
 from recon.synth.chains import ChainDraw, ImagingChain, draw_chain, resolve_chain
-from recon.synth.clicks import make_seeds, random_header_error
+from recon.synth.clicks import HEADER_SHIFT_MM, make_seeds, random_header_error
 from recon.synth.presets import PRESETS, PhantomPreset
 from recon.synth.render import render_view
 from recon.synth.tree import PhantomTruth, TreeDraw, draw_tree, tree_fits, truth_from_tree
@@ -68,7 +78,9 @@ class PhantomCase:
         the crossing vessel lies over the lesion), "loop_s_mm" (the loop's
         arc-length range on the main vessel) and "loop_crossing_views" (the
         views where its projection crosses itself), "faint_distal_fraction",
-        "eccentric" ((fraction, angle rad)).
+        "eccentric" ((fraction, angle rad)); with a faint view (a clinical
+        export chain) "faint_view" ("A" or "B") and "faint_contrast_levels".
+    lead : the pacing lead rendered into both views, or None.
     """
 
     preset: str
@@ -88,6 +100,7 @@ class PhantomCase:
     anatomy: str | None = None
     catheter: Catheter | None = None
     anatomy_info: dict = field(default_factory=dict)
+    lead: Lead | None = None
 
 
 def make_phantom(
@@ -146,7 +159,11 @@ def make_phantom(
     view_a = p.view_a if draw is None else _with_detector(p.view_a, draw)
     view_b_nominal = p.view_b if draw is None else _with_detector(p.view_b, draw)
     if header_error:
-        rotvec, t_mm = random_header_error(np.random.default_rng(ss_error), view_b_nominal)
+        table = chain_spec is not None and chain_spec.table_shift_mm is not None
+        rotvec, t_mm = random_header_error(
+            np.random.default_rng(ss_error), view_b_nominal,
+            shift_mm=chain_spec.table_shift_mm if table else HEADER_SHIFT_MM,
+            in_table_plane=table)
     else:
         rotvec, t_mm = np.zeros(3), np.zeros(3)
     view_b_true = view_b_nominal.with_correction(rotvec, t_mm)
@@ -180,15 +197,30 @@ def make_phantom(
         view_b_true,
     )
     catheter = None
-    if draw is not None and "catheter" in draw.background:
+    if draw is not None and "catheter" in draw.background and draw.faint_view is not None:
+        catheter = catheter_beside(extra_rng, truth.vessels[0][0], truth.segment_X_world,
+                                   (view_a, view_b_true), "AB".index(draw.faint_view))
+    elif draw is not None and "catheter" in draw.background:
         catheter = guiding_catheter(extra_rng, truth.vessels[0][0], (view_a, view_b_true))
+    lead = None
+    if draw is not None and "lead" in draw.background:
+        lead = pacing_lead(extra_rng, truth.segment_X_world, (view_a, view_b_true))
+    if draw is not None and draw.faint_view is not None:
+        info["faint_view"] = draw.faint_view
+        info["faint_contrast_levels"] = draw.faint_contrast_levels
     image_a = image_b = frames_a = frames_b = None
     frame_index = 0
     if render and draw is not None:
         rrng = np.random.default_rng(ss_render)
         kwargs = {"catheter": catheter} if fade is None else {"catheter": catheter, "fade": fade}
-        image_a = render_chain_view(rrng, view_a, truth.vessels, draw, **kwargs)
-        image_b = render_chain_view(rrng, view_b_true, truth.vessels, draw, **kwargs)
+        if lead is not None:
+            kwargs["lead"] = lead
+        faint = {"contrast_levels": draw.faint_contrast_levels,
+                 "contrast_X_world": truth.segment_X_world}
+        image_a = render_chain_view(rrng, view_a, truth.vessels, draw, **kwargs,
+                                    **(faint if draw.faint_view == "A" else {}))
+        image_b = render_chain_view(rrng, view_b_true, truth.vessels, draw, **kwargs,
+                                    **(faint if draw.faint_view == "B" else {}))
     elif render:
         rrng = np.random.default_rng(ss_render)
         frames_a, frame_index = render_view(rrng, view_a, truth.vessels, n_frames, fade)
@@ -214,6 +246,7 @@ def make_phantom(
         anatomy=None if anat is None else anat.name,
         catheter=catheter,
         anatomy_info=info,
+        lead=lead,
     )
 
 

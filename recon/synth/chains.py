@@ -35,12 +35,24 @@ Physical figures:
   size in proportion to its area (the same dose), and a noise factor m
   divides the quanta by m^2 (the relative noise is m times larger).
 - Guiding catheter: 6-7 F (1 F = 1/3 mm), :mod:`recon.synth.anatomy`.
+
+The clinical export chain (:data:`CLINICAL_CHAINS`) adds what real pairs
+exported from a cath lab show (issue 45): the stored 8-bit values go
+through a real baseline JPEG encode and decode (libjpeg through OpenCV,
+quality 75-92, :func:`jpeg_roundtrip`); in one view, drawn per case, the vessels
+are only 5-10 grey levels below their background (the noise-free contrast
+on the stored scale, median along the clicked segment, beside the guiding
+catheter and a pacing lead, ``lead`` background,
+:func:`recon.synth.anatomy.pacing_lead`); and view B's header misses a
+table move of 10-15 mm (the isocentre shift of
+:func:`recon.synth.clicks.random_header_error`).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import ndimage
@@ -49,17 +61,21 @@ __all__ = [
     "ImagingChain",
     "ChainDraw",
     "CHAINS",
+    "CLINICAL_CHAINS",
+    "ALL_CHAINS",
+    "VARIED_CHAINS",
     "BACKGROUNDS",
     "draw_chain",
     "resolve_chain",
     "display_values",
+    "jpeg_roundtrip",
     "MAPPINGS",
 ]
 
 FloatArray = NDArray[np.float64]
 
 MAPPINGS = ("lin", "log", "disp")
-BACKGROUNDS = ("diaphragm", "ribs", "catheter", "table")
+BACKGROUNDS = ("diaphragm", "ribs", "catheter", "table", "lead")
 T_MIN = 1e-3  # smallest relative intensity a log mapping takes (collimator leakage is 1e-2)
 
 
@@ -81,6 +97,13 @@ class ImagingChain:
     tag : PixelIntensityRelationship (0028,1040) of a file: "LIN", "LOG", "DISP" or None.
     unsharp_gain : edge-enhancement gain range ("disp" only).
     description : one line.
+    jpeg_quality : JPEG quality range (integers) of a lossy 8-bit export, or None.
+    faint_contrast_levels : grey-level range of the vessels' contrast in the faint
+        view (one view per case), or None (no faint view).
+    table_shift_mm : range of the table / isocentre shift in view B's header error,
+        or None (:data:`recon.synth.clicks.HEADER_SHIFT_MM`).
+    window_t : "disp": ranges of the relative intensities t mapped to 0 and to 1,
+        or None (0.15-0.3 and 1.1-1.3).
     """
 
     name: str
@@ -95,6 +118,10 @@ class ImagingChain:
     tag: str | None
     unsharp_gain: tuple[float, float] = (0.0, 0.0)
     description: str = ""
+    jpeg_quality: tuple[int, int] | None = None
+    faint_contrast_levels: tuple[float, float] | None = None
+    table_shift_mm: tuple[float, float] | None = None
+    window_t: tuple[tuple[float, float], tuple[float, float]] | None = None
 
     def __post_init__(self) -> None:
         if self.mapping not in MAPPINGS:
@@ -104,6 +131,8 @@ class ImagingChain:
         unknown = set(self.background) - set(BACKGROUNDS)
         if unknown:
             raise ValueError(f"chain {self.name}: unknown background {sorted(unknown)}")
+        if self.jpeg_quality is not None and self.bits_stored != 8:
+            raise ValueError(f"chain {self.name}: a JPEG export stores 8 bits")
 
 
 CHAINS: dict[str, ImagingChain] = {
@@ -141,6 +170,28 @@ CHAINS: dict[str, ImagingChain] = {
         ),
     )
 }
+"""The six synthetic chains (the tree-varied suite cycles these, in this order)."""
+
+CLINICAL_CHAINS: dict[str, ImagingChain] = {
+    c.name: c
+    for c in (
+        ImagingChain(
+            "clinical-jpeg-8bit", "disp", 512, (0.28, 0.38), (0.7, 1.1), (0.05, 0.20),
+            (1.0, 1.8), ("diaphragm", "ribs", "catheter", "table", "lead"), 8, None,
+            unsharp_gain=(0.3, 0.8), jpeg_quality=(75, 92), faint_contrast_levels=(5.0, 10.0),
+            table_shift_mm=(10.0, 15.0), window_t=((0.3, 0.5), (1.6, 2.2)),
+            description="cath-lab JPEG export (8-bit, baseline JPEG q 75-92): one view's "
+            "vessels 5-10 grey levels faint beside the catheter and a pacing lead, "
+            "10-15 mm table shift",
+        ),
+    )
+}
+"""Chains modelled on real clinical pairs (issue 45), after the six of :data:`CHAINS`."""
+
+ALL_CHAINS: dict[str, ImagingChain] = {**CHAINS, **CLINICAL_CHAINS}
+#: The varied suite's chains, in order: the six of CHAINS, then the clinical ones
+#: (appended, so the six keep their chain index and case seeds).
+VARIED_CHAINS: tuple[str, ...] = tuple(ALL_CHAINS)
 
 
 @dataclass(frozen=True)
@@ -161,6 +212,9 @@ class ChainDraw:
     window : "disp": (ln t mapped to 0, ln t mapped to 1).
     gamma : "disp": exponent of the windowed value.
     unsharp_gain, unsharp_sigma_mm : "disp": edge enhancement ``y + gain (y - G y)``.
+    jpeg_quality : quality of the JPEG export the stored values pass through, or None.
+    faint_view : "A" or "B", the view whose vessels are faint, or None.
+    faint_contrast_levels : the faint view's vessel contrast, grey levels, or None.
     """
 
     name: str
@@ -183,6 +237,9 @@ class ChainDraw:
     gamma: float = 1.0
     unsharp_gain: float = 0.0
     unsharp_sigma_mm: float = 1.5
+    jpeg_quality: int | None = None
+    faint_view: str | None = None
+    faint_contrast_levels: float | None = None
 
     @property
     def max_value(self) -> int:
@@ -190,24 +247,33 @@ class ChainDraw:
         return (1 << self.bits_stored) - 1
 
     def to_dict(self) -> dict:
-        """JSON-ready parameters."""
-        out = {k: getattr(self, k) for k in self.__dataclass_fields__}
+        """JSON-ready parameters (the clinical export's only when the chain has them)."""
+        out = {k: getattr(self, k) for k in self.__dataclass_fields__
+               if k not in _CLINICAL_FIELDS or getattr(self, k) is not None}
         out["background"] = list(self.background)
         out["window"] = list(self.window)
         return out
+
+
+_CLINICAL_FIELDS = ("jpeg_quality", "faint_view", "faint_contrast_levels")
 
 
 def resolve_chain(chain: str | ImagingChain) -> ImagingChain:
     """The :class:`ImagingChain` of a name; ValueError for an unknown name."""
     if isinstance(chain, ImagingChain):
         return chain
-    if chain not in CHAINS:
-        raise ValueError(f"unknown imaging chain {chain!r} (use one of {', '.join(CHAINS)})")
-    return CHAINS[chain]
+    if chain not in ALL_CHAINS:
+        raise ValueError(f"unknown imaging chain {chain!r} (use one of {', '.join(ALL_CHAINS)})")
+    return ALL_CHAINS[chain]
 
 
 def draw_chain(chain: ImagingChain, rng: np.random.Generator) -> ChainDraw:
-    """One :class:`ChainDraw` inside ``chain``'s ranges (always the same number of draws)."""
+    """One :class:`ChainDraw` inside ``chain``'s ranges.
+
+    Every chain takes the same draws first; a chain with a JPEG export or a
+    faint view takes its further draws after them, so the six chains of
+    :data:`CHAINS` draw exactly what they drew before those options existed.
+    """
     u = rng.uniform
     spacing = float(u(*chain.pixel_spacing_mm))
     values = {
@@ -224,6 +290,14 @@ def draw_chain(chain: ImagingChain, rng: np.random.Generator) -> ChainDraw:
         "unsharp_gain": float(u(*chain.unsharp_gain)),
         "unsharp_sigma_mm": float(u(0.8, 2.5)),
     }
+    if chain.jpeg_quality is not None:
+        values["jpeg_quality"] = int(rng.integers(chain.jpeg_quality[0], chain.jpeg_quality[1] + 1))
+    if chain.faint_contrast_levels is not None:
+        values["faint_view"] = "AB"[int(rng.integers(2))]
+        values["faint_contrast_levels"] = float(u(*chain.faint_contrast_levels))
+    if chain.window_t is not None:
+        values["window"] = (float(np.log(u(*chain.window_t[0]))),
+                            float(np.log(u(*chain.window_t[1]))))
     return ChainDraw(
         name=chain.name,
         mapping=chain.mapping,
@@ -237,12 +311,13 @@ def draw_chain(chain: ImagingChain, rng: np.random.Generator) -> ChainDraw:
     )
 
 
-def display_values(t: ArrayLike, draw: ChainDraw) -> NDArray[np.float32]:
+def display_values(t: ArrayLike, draw: ChainDraw, *, exact: bool = False) -> NDArray:
     """Stored values (H, W) of relative intensities ``t`` (H, W) under the chain's mapping.
 
     ``t`` is counts / unattenuated counts (1 = no attenuation; scatter can
     take it above 1). Values are rounded and clipped to 0..2^bits - 1
-    (integers stored as float32).
+    (integers stored as float32); ``exact``: clipped but not rounded
+    (float64, for measuring a contrast below one grey level's precision).
     """
     t = np.asarray(t, dtype=float)
     top = float(draw.max_value)
@@ -256,4 +331,26 @@ def display_values(t: ArrayLike, draw: ChainDraw) -> NDArray[np.float32]:
         if draw.unsharp_gain > 0:
             sigma_px = draw.unsharp_sigma_mm / draw.pixel_spacing_mm
             y = y + draw.unsharp_gain * (y - ndimage.gaussian_filter(y, sigma_px, mode="nearest"))
+    if exact:
+        return np.clip(y * top, 0.0, top)
     return np.clip(np.round(y * top), 0.0, top).astype(np.float32)
+
+
+def jpeg_roundtrip(values: ArrayLike, quality: int) -> NDArray[np.float32]:
+    """8-bit stored values (H, W) after a baseline JPEG encode and decode at ``quality``.
+
+    A real lossy export, in memory: OpenCV's libjpeg encoder (greyscale, 8 x
+    8 DCT blocks, the IJG quantisation tables scaled to ``quality`` as every
+    libjpeg-based exporter scales them, baseline, not progressive, no
+    optimised Huffman tables), then its decoder. ``values`` must be
+    integers in 0..255.
+    """
+    img = np.asarray(values)
+    if img.ndim != 2 or img.min() < 0 or img.max() > 255:
+        raise ValueError("jpeg_roundtrip takes one 8-bit image (H, W) of values 0..255")
+    params = [cv2.IMWRITE_JPEG_QUALITY, int(quality), cv2.IMWRITE_JPEG_PROGRESSIVE, 0,
+              cv2.IMWRITE_JPEG_OPTIMIZE, 0]
+    ok, buf = cv2.imencode(".jpg", np.round(img).astype(np.uint8), params)
+    if not ok:
+        raise ValueError("the JPEG encoder refused the image")
+    return cv2.imdecode(buf, cv2.IMREAD_GRAYSCALE).astype(np.float32)

@@ -44,7 +44,9 @@ WAYPOINT_MIN_GAP_PX = 5.0  # no waypoint this close to a neighbouring click
 
 
 def random_header_error(
-    rng: np.random.Generator, view: ViewGeometry | None = None
+    rng: np.random.Generator, view: ViewGeometry | None = None,
+    shift_mm: tuple[float, float] = HEADER_SHIFT_MM,
+    in_table_plane: bool = False,
 ) -> tuple[FloatArray, FloatArray]:
     """Draw a realistic error of view B's header as a rigid rig correction.
 
@@ -54,12 +56,17 @@ def random_header_error(
     uniform in :data:`HEADER_ANGLE_ERROR_DEG` with a random sign; the
     translation is an SOD error along the view's d (magnitude uniform in
     :data:`HEADER_SOD_ERROR_MM`, random sign) plus a table/isocenter shift of magnitude
-    uniform in :data:`HEADER_SHIFT_MM` in a random direction.
+    uniform in ``shift_mm`` (default :data:`HEADER_SHIFT_MM`) in a random direction.
 
     Parameters
     ----------
     rng : random generator.
     view : the nominal view B (for its u and d axes); an AP view if None.
+    shift_mm : range of the table / isocenter shift (a table move between the
+        two runs: 10-15 mm in the clinical export chain); the same draws.
+    in_table_plane : the shift lies in the table plane (world x and z: left-right
+        and head-foot of a supine patient, DICOM LPS) as a table move does; the
+        same draws, the direction's y part dropped.
 
     Returns
     -------
@@ -72,8 +79,10 @@ def random_header_error(
     d_alpha, d_beta = np.deg2rad(rng.uniform(lo, hi, 2) * rng.choice([-1.0, 1.0], 2))
     R = rotation_from_rotvec(u * d_beta) @ rotation_from_rotvec(np.array([0.0, 0.0, d_alpha]))
     direction = rng.normal(size=3)
+    if in_table_plane:
+        direction[1] = 0.0
     direction /= np.linalg.norm(direction)
-    shift = direction * rng.uniform(*HEADER_SHIFT_MM)
+    shift = direction * rng.uniform(*shift_mm)
     sod_error = rng.uniform(*HEADER_SOD_ERROR_MM) * rng.choice([-1.0, 1.0])
     t_mm = sod_error * d + shift
     return rotvec_from_rotation(R), t_mm

@@ -1,13 +1,31 @@
 """Suites of phantom cases: the varied suite that no single imaging chain can fool.
 
 :func:`varied_cases` lists, for every imaging chain of
-:data:`recon.synth.chains.CHAINS`, ``n_per_chain`` seeded cases: the
+:data:`recon.synth.chains.VARIED_CHAINS`, ``n_per_chain`` seeded cases: the
 geometry alternates between the paper's Table-1 presets (and the static
 pair) and random C-arm pairs (:func:`random_geometry`), and the anatomy
 cycles through the plain tree and the harder variants
 (:data:`recon.synth.anatomy.ANATOMY_CYCLE`). Each chain starts the cycles
 at its own offset, so every chain meets every variant and preset.
 :func:`make_suite_case` makes one of them.
+
+The chains, in their order (chain j's cases have seeds ``seed + 100 j + k``):
+
+0. ``ii-12bit-lin``: image intensifier, 12-bit values linear in intensity;
+1. ``flat-1024-log``: flat panel 1024 x 1024, 12-bit values linear in attenuation;
+2. ``flat-1024-disp-8bit``: display-processed 8-bit export of a flat panel;
+3. ``glare-8bit``: strong veiling glare, blurred, 8-bit, no tag;
+4. ``low-dose-log``: noise x2-x3, values linear in attenuation, no tag;
+5. ``sharp-display``: strong edge enhancement, 12-bit display values;
+6. ``clinical-jpeg-8bit`` (added for issue 45, after the real clinical pairs):
+   a cath-lab export through a real baseline JPEG (quality 75-92); in one
+   view (A or B, drawn) the vessels are 5-10 grey levels below their
+   background, beside the guiding catheter and a pacing lead that crosses
+   the field 2-6 mm from the clicked segment; view B's header misses a
+   10-15 mm table shift.
+
+Chain 6 was appended: chains 0-5 keep their index, seeds, geometries,
+anatomy and images (bit-identical to the suite before it).
 """
 
 from __future__ import annotations
@@ -18,7 +36,7 @@ import numpy as np
 
 from recon.synth.anatomy import ANATOMY_CYCLE
 from recon.synth.case import PhantomCase, make_phantom
-from recon.synth.chains import CHAINS
+from recon.synth.chains import VARIED_CHAINS
 from recon.synth.presets import PRESETS, PhantomPreset, preset_view
 
 __all__ = [
@@ -47,7 +65,7 @@ class SuiteCase:
 
     Attributes
     ----------
-    chain : imaging chain name (a key of :data:`recon.synth.chains.CHAINS`).
+    chain : imaging chain name (one of :data:`recon.synth.chains.VARIED_CHAINS`).
     preset : a :data:`recon.synth.presets.PRESETS` key or a random :class:`PhantomPreset`.
     seed : the case's seed.
     anatomy : anatomy variant name (a key of :data:`recon.synth.anatomy.ANATOMIES`).
@@ -109,7 +127,7 @@ def varied_cases(n_per_chain: int = 8, seed: int = 0) -> list[SuiteCase]:
     if n_per_chain < 1:
         raise ValueError(f"n_per_chain must be at least 1, got {n_per_chain}")
     out = []
-    for j, chain in enumerate(CHAINS):
+    for j, chain in enumerate(VARIED_CHAINS):
         for k in range(n_per_chain):
             case_seed = int(seed) + CASE_SEED_STRIDE * j + k
             if k % 2 == 0:

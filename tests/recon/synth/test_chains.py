@@ -6,14 +6,14 @@ import numpy as np
 import pytest
 
 from recon.geometry import ViewGeometry
-from recon.synth import CHAINS, make_phantom
+from recon.synth import ALL_CHAINS, CHAINS, make_phantom
 from recon.synth.anatomy import Catheter
 from recon.synth.chain_render import render_chain_view, supersample_for
 from recon.synth.chains import ChainDraw, display_values, draw_chain
 
 
 def small_draw(name: str, size: int = 96, spacing: float = 0.3) -> ChainDraw:
-    draw = draw_chain(CHAINS[name], np.random.default_rng(3))
+    draw = draw_chain(ALL_CHAINS[name], np.random.default_rng(3))
     return replace(draw, rows=size, cols=size, pixel_spacing_mm=spacing)
 
 
@@ -48,7 +48,7 @@ def test_there_are_at_least_six_chains_spanning_the_ranges():
 
 
 def test_draws_stay_inside_the_chain_ranges_and_are_seeded():
-    for chain in CHAINS.values():
+    for chain in ALL_CHAINS.values():
         for seed in range(5):
             d = draw_chain(chain, np.random.default_rng(seed))
             assert chain.pixel_spacing_mm[0] <= d.pixel_spacing_mm <= chain.pixel_spacing_mm[1]
@@ -58,7 +58,7 @@ def test_draws_stay_inside_the_chain_ranges_and_are_seeded():
             assert d == draw_chain(chain, np.random.default_rng(seed))
 
 
-@pytest.mark.parametrize("name", list(CHAINS))
+@pytest.mark.parametrize("name", list(ALL_CHAINS))
 def test_every_chain_renders_a_vessel_and_a_catheter(name):
     draw = small_draw(name)
     view = small_view(draw)

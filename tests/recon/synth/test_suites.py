@@ -4,21 +4,22 @@ from collections import Counter
 
 import numpy as np
 
-from recon.synth import ANATOMIES, CHAINS, PRESETS, varied_cases
+from recon.synth import ANATOMIES, CHAINS, PRESETS, VARIED_CHAINS, varied_cases
 from recon.synth.suites import MIN_SEPARATION_DEG, make_suite_case
 
 
 def test_the_varied_suite_has_every_chain_and_variant():
     cases = varied_cases()
-    assert len(cases) == 8 * len(CHAINS) and len(CHAINS) >= 6
+    assert len(cases) == 8 * len(VARIED_CHAINS) and len(VARIED_CHAINS) >= 7
+    assert set(CHAINS) < set(VARIED_CHAINS)
     per_chain = Counter(c.chain for c in cases)
-    assert set(per_chain) == set(CHAINS) and set(per_chain.values()) == {8}
+    assert set(per_chain) == set(VARIED_CHAINS) and set(per_chain.values()) == {8}
     assert set(Counter(c.anatomy for c in cases)) == set(ANATOMIES)
-    for chain in CHAINS:  # every chain meets the plain tree and every harder variant
+    for chain in VARIED_CHAINS:  # every chain meets the plain tree and every harder variant
         assert {c.anatomy for c in cases if c.chain == chain} == set(ANATOMIES)
     table1 = {c.preset for c in cases if isinstance(c.preset, str)}
     assert table1 == set(PRESETS)
-    assert sum(not isinstance(c.preset, str) for c in cases) == 4 * len(CHAINS)
+    assert sum(not isinstance(c.preset, str) for c in cases) == 4 * len(VARIED_CHAINS)
     assert len({(c.preset_name, c.seed) for c in cases}) == len(cases)
     assert varied_cases() == cases  # seeded: the same list every time
     assert varied_cases(seed=1) != cases
