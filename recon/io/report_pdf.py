@@ -5,16 +5,20 @@ and "research use only"; both angiograms with every segment's trace (one colour 
 segment) and each lesion's MLD numbered ("LAD 1"); a 3D snapshot of every centerline
 coloured by lumen diameter (seen as in view A); a table of every segment (length,
 MLD, % diameter stenosis, lesion length, each with its 95 % interval, and its
-lesions); the bifurcations (Medina class, angles, the three segments' % diameter
-stenosis); the best next view; the warnings.
+lesions, and its FFR with its interval); the bifurcations (Medina class, angles, the three
+segments' % diameter stenosis); the best next view; the warnings.
 
 Then one page per segment: its diameter profile (measured, smoothed, the reference,
 the diameter's 95 % band) with bands for each lesion (numbered), a narrowing not
 confirmed, the zones at the clicked ends or the ostium, where a side branch leaves
-it and where one view's radius was replaced because another vessel overlaps it; its
-figures with their 95 % intervals; its lesions, each with MLD, % diameter stenosis,
-length and site, and their intervals; and whether the most severe lesion stands out
-(:mod:`recon.lumen.lesions`).
+it and where one view's radius was replaced because another vessel overlaps it; its FFR
+(:mod:`recon.lumen.ffr`, a model estimate for research): the distal value with its 95 %
+interval and the band over the assumed flow, said not to be a confidence interval, and
+the pullback chart (FFR along the segment on the profile's distance scale, its 95 %
+interval shaded, the flow band dashed, a line at 0.80, the lesions), or "FFR not
+computed" with the warning's reason; its figures with their 95 % intervals; its lesions,
+each with MLD, % diameter stenosis, length and site, and their intervals; and whether the
+most severe lesion stands out (:mod:`recon.lumen.lesions`).
 
 No patient name, ID or date unless ``identify`` (then read from the DICOM headers).
 :func:`write_report_pdf` is the page's call; the command line's ``--report`` renders
@@ -32,18 +36,22 @@ import numpy as np
 from numpy.typing import NDArray
 
 from recon import __version__
+from recon.lumen.ffr import RESEARCH_NOTE
 
 if TYPE_CHECKING:
+    from recon.lumen.ffr import FFRResult
     from recon.pipeline import Reconstruction
     from recon.tree import TreeReconstruction
 
 __all__ = ["report_figure", "report_pages", "report_pdf_bytes", "write_report_pdf",
-           "side_branch_bands"]
+           "side_branch_bands", "ffr_line", "ffr_not_computed"]
 
 A4_IN = (8.27, 11.69)
 #: One colour per segment (the seeds' order), as matplotlib's tab10.
 SEGMENT_COLOURS = ("tab:orange", "tab:blue", "tab:green", "tab:red", "tab:purple",
                    "tab:brown", "tab:pink", "tab:olive", "tab:cyan", "tab:gray")
+#: The FFR cut-off drawn on the pullback chart.
+FFR_CUTOFF = 0.80
 _CI_KEYS = {"mld_mm": "MLD", "diameter_stenosis_pct": "%DS",
             "lesion_length_mm": "lesion length", "segment_length_mm": "length"}
 
@@ -149,7 +157,7 @@ def report_figure(result, image_a: NDArray | None, image_b: NDArray | None,
     _draw_3d(fig, parts)
     _draw_best_view(fig, first)
     _draw_segment_table(fig, parts)
-    _draw_bifurcations(fig, result, top=0.34 - 0.0185 * (len(parts) + 1) - 0.03)
+    _draw_bifurcations(fig, result, top=0.34 - 0.0185 * (len(parts) + 1) - 0.042)
     warnings = list(getattr(result, "warnings", ()))
     if warnings:
         shown = warnings[:4] + ([f"… {len(warnings) - 4} more in report.json"]
@@ -277,8 +285,8 @@ def _draw_segment_table(fig, parts: list[Reconstruction]) -> None:
     ax = fig.add_axes((0.05, 0.22, 0.90, 0.12))
     ax.set_axis_off()
     ax.set_title("Segments (95 % intervals in brackets)", fontsize=9, loc="left")
-    header = ["Segment", "Length", "Minimal lumen diameter", "% diameter stenosis",
-              "Lesion length", "Lesions"]
+    header = ["Segment", "Length", "MLD", "% diameter stenosis", "Lesion length",
+              "FFR (model)", "Lesions"]
     rows = []
     for rec in parts:
         m = rec.measurements
@@ -293,10 +301,12 @@ def _draw_segment_table(fig, parts: list[Reconstruction]) -> None:
                      _with_ci(m.diameter_stenosis_pct, _ci(rec, "diameter_stenosis_pct"),
                               ".0f", "%"),
                      _with_ci(m.lesion_length_mm, _ci(rec, "lesion_length_mm"), ".1f", "mm"),
+                     "not computed" if rec.ffr is None else _with_ci(rec.ffr.distal,
+                                                                     rec.ffr.ci95, ".2f", ""),
                      lesions or ("none" + (" (ostium not confirmed)"
                                            if report.unsupported else ""))])
     table = ax.table(cellText=rows, colLabels=header, loc="upper left", cellLoc="left",
-                     colWidths=[0.1, 0.16, 0.2, 0.16, 0.16, 0.22])
+                     colWidths=[0.08, 0.15, 0.15, 0.14, 0.14, 0.12, 0.22])
     table.auto_set_font_size(False)
     table.set_fontsize(6.5)
     table.scale(1.0, 1.25)
@@ -310,7 +320,7 @@ def _draw_bifurcations(fig, result, top: float) -> None:
         ax.text(0, 0.8, "Bifurcations: none reconstructed (one segment)", fontsize=8)
         return
     ax.set_title("Bifurcations (Medina: 1 where that segment has ≥ 50 % diameter stenosis; "
-                 "the side branch's first 10 mm from its carina, its ostium included)",
+                 "the side branch's first 10 mm\nfrom its carina, its ostium included)",
                  fontsize=8, loc="left")
     header = ["Bifurcation", "Main › side branch", "Medina", "Angle", "Proximal angle",
               "%DS proximal main", "%DS distal main", "%DS side branch"]
@@ -336,13 +346,17 @@ def segment_figure(result, rec: Reconstruction) -> object:
              fontsize=13, weight="bold", va="top")
     fig.text(0.05, 0.952, f"coronary3d {__version__} · RESEARCH USE ONLY", fontsize=8,
              color="firebrick", va="top")
-    _draw_profile(fig.add_axes((0.09, 0.62, 0.86, 0.29)), result, rec)
+    s_mm = rec.profile.s_mm
+    pad = 0.015 * float(s_mm[-1] - s_mm[0])
+    xlim = (float(s_mm[0]) - pad, float(s_mm[-1]) + pad)  # both charts: one distance scale
+    _draw_profile(fig.add_axes((0.09, 0.73, 0.86, 0.185)), result, rec, xlim)
+    _draw_ffr(fig, rec, xlim)
     _draw_figures(fig, rec)
     _draw_lesions(fig, rec)
     return fig
 
 
-def _draw_profile(ax, result, rec: Reconstruction) -> None:
+def _draw_profile(ax, result, rec: Reconstruction, xlim: tuple[float, float]) -> None:
     prof = rec.profile
     m = rec.measurements
     top = float(np.max(prof.diameter_mm)) * 1.25
@@ -384,18 +398,96 @@ def _draw_profile(ax, result, rec: Reconstruction) -> None:
     if not m.has_lesion:
         ax.plot(m.mld_s_mm, m.mld_mm, "o", color="magenta", ms=5, label="MLD (no lesion)")
     ax.set_ylim(0.0, top)
+    ax.set_xlim(*xlim)
     ax.set_xlabel("distance along the 3D centerline (mm)", fontsize=8)
     ax.set_ylabel("diameter (mm)", fontsize=8)
     ax.tick_params(labelsize=7)
     ax.set_title("Diameter profile", fontsize=9)
-    ax.legend(fontsize=6.5, loc="upper center", bbox_to_anchor=(0.5, -0.14), ncol=4,
+    ax.legend(fontsize=6.5, loc="upper center", bbox_to_anchor=(0.5, -0.2), ncol=4,
               frameon=False)
+
+
+def ffr_line(ffr: FFRResult) -> str:
+    """The FFR's line on a segment's page: the distal value, its 95 % interval, and the
+    band over the assumed hyperemic flow, said not to be a confidence interval."""
+    ci = ffr.ci95
+    v0, v1 = ffr.model.flow_band_m_s
+    band = ffr.flow_band
+    return (f"FFR (model estimate, research use only) {ffr.distal:.2f} "
+            + (f"(95 % {ci[0]:.2f}–{ci[1]:.2f})" if ci is not None
+               else "(no 95 % interval: the measurement intervals were not computed)")
+            + f"; flow assumption {v0:g}–{v1:g} m/s: {band[0]:.2f}–{band[1]:.2f} "
+            "(not a confidence interval)")
+
+
+def ffr_not_computed(rec: Reconstruction) -> str:
+    """"FFR not computed: <reason>", the reason from the reconstruction's warnings."""
+    prefix = "FFR not computed: "
+    reasons = [w[len(prefix):] for w in rec.warnings if w.startswith(prefix)]
+    reason = reasons[0].removeprefix("FFR: ") if reasons else "no reason was recorded"
+    return prefix + reason
+
+
+def _draw_ffr(fig, rec: Reconstruction, xlim: tuple[float, float]) -> None:
+    """The FFR's line, its pullback chart (FFR along the segment with its 95 % interval
+    shaded, the flow assumption's band dashed, a line at the 0.80 cut-off, the lesions)
+    and the research-use sentence; or why it was not computed."""
+    ffr = getattr(rec, "ffr", None)
+    if ffr is None:
+        fig.text(0.05, 0.64, _wrap(ffr_not_computed(rec), 110), fontsize=8.5, va="top",
+                 color="darkred")
+        ax = fig.add_axes((0.09, 0.475, 0.86, 0.11), facecolor="0.97")
+        ax.set_xticks([])
+        ax.set_yticks([])
+        ax.text(0.5, 0.5, "no FFR pullback: the FFR was not computed", ha="center",
+                va="center", fontsize=8, color="dimgray", transform=ax.transAxes)
+        return
+    line = ffr_line(ffr)
+    cut = line.index("; flow assumption") + 1  # the value on one line, the flow's band below
+    fig.text(0.05, 0.64, line[:cut] + "\n" + line[cut:].strip(), fontsize=8, va="top",
+             weight="bold", linespacing=1.4)
+    ax = fig.add_axes((0.09, 0.475, 0.86, 0.13))
+    s = np.asarray(ffr.s_mm, float)
+    for k, les in enumerate(rec.lesions.lesions):
+        n = les.narrowing
+        ax.axvspan(n.start_s_mm, n.end_s_mm, color="mistyrose", zorder=0,
+                   label="lesion" if k == 0 else "_")
+        ax.text(0.5 * (n.start_s_mm + n.end_s_mm), 1.045, str(les.number), ha="center",
+                va="center", fontsize=8, weight="bold", color="crimson")
+    shown = [np.asarray(ffr.ffr, float), *np.asarray(ffr.band, float)]
+    if ffr.ffr_lo is not None and ffr.ffr_hi is not None:
+        ax.fill_between(s, ffr.ffr_lo, ffr.ffr_hi, color="cornflowerblue", alpha=0.3, lw=0,
+                        label="95 % interval")
+        shown.append(np.asarray(ffr.ffr_lo, float))
+    v0, v1 = ffr.model.flow_band_m_s
+    for k, row in enumerate(ffr.band):
+        ax.plot(s, row, ls="--", lw=0.9, color="darkorange",
+                label=f"flow assumption {v0:g}–{v1:g} m/s (not a confidence interval)"
+                if k == 0 else "_")
+    ax.plot(s, ffr.ffr, color="navy", lw=1.5, label="FFR (model estimate)")
+    ax.axhline(FFR_CUTOFF, color="crimson", ls=":", lw=1.0, label=f"{FFR_CUTOFF:.2f} cut-off")
+    ax.annotate(f"{ffr.distal:.2f}", (s[-1], ffr.distal), xytext=(3, 0),
+                textcoords="offset points", fontsize=7.5, color="navy", va="center",
+                weight="bold", annotation_clip=False)
+    low = max(0.0, np.floor(min(0.7, float(min(np.min(v) for v in shown)) - 0.03) * 20) / 20)
+    ax.set_ylim(low, 1.07)  # FFR is at most 1: the room above is the lesions' numbers
+    step = 0.05 if low >= 0.5 else 0.1
+    ax.set_yticks(np.arange(np.ceil(low / step) * step, 1.0 + 1e-9, step))
+    ax.set_xlim(*xlim)
+    ax.set_xlabel("distance along the 3D centerline (mm)", fontsize=8)
+    ax.set_ylabel("FFR pullback", fontsize=8)
+    ax.tick_params(labelsize=7)
+    ax.legend(fontsize=6.5, loc="upper center", bbox_to_anchor=(0.5, -0.33), ncol=5,
+              frameon=False)
+    fig.text(0.05, 0.405, _wrap("The FFR is " + RESEARCH_NOTE + ". It must not guide "
+                                "treatment.", 150),
+             fontsize=7, va="top", color="firebrick")
 
 
 def _draw_figures(fig, rec: Reconstruction) -> None:
     m = rec.measurements
     prof = rec.profile
-    ax = fig.add_axes((0.05, 0.27, 0.45, 0.22))
+    ax = fig.add_axes((0.05, 0.17, 0.45, 0.19))
     ax.set_axis_off()
     ax.set_title("Measurements (95 % interval)", fontsize=9, loc="left")
     ref_prox = float(np.interp(m.lesion_start_s_mm, prof.s_mm, prof.reference_diameter_mm))
@@ -418,8 +510,8 @@ def _draw_figures(fig, rec: Reconstruction) -> None:
         ("MLD at", _with_ci(m.mld_s_mm, _ci(rec, "mld_s_mm"), ".1f", "mm")),
     ]
     ffr = getattr(rec, "ffr", None)
-    if ffr is not None:
-        rows.append(("FFR (model estimate)", _with_ci(ffr.distal, ffr.ci95, ".2f", "")))
+    rows.append(("FFR (model estimate, research)",
+                 "not computed" if ffr is None else _with_ci(ffr.distal, ffr.ci95, ".2f", "")))
     table = ax.table(cellText=rows, colWidths=[0.5, 0.5], loc="upper left", cellLoc="left")
     table.auto_set_font_size(False)
     table.set_fontsize(7)
@@ -428,7 +520,7 @@ def _draw_figures(fig, rec: Reconstruction) -> None:
 
 def _draw_lesions(fig, rec: Reconstruction) -> None:
     report = rec.lesions
-    ax = fig.add_axes((0.05, 0.05, 0.90, 0.17))
+    ax = fig.add_axes((0.05, 0.02, 0.90, 0.12))
     ax.set_axis_off()
     ax.set_title("Lesions (95 % interval)", fontsize=9, loc="left")
     if not report.lesions:
@@ -450,9 +542,9 @@ def _draw_lesions(fig, rec: Reconstruction) -> None:
         table.set_fontsize(6.5)
         table.scale(1.0, 1.25)
     summary = report.summary()
-    fig.text(0.54, 0.49, _wrap(summary[:1].upper() + summary[1:] + ".", 60),
+    fig.text(0.54, 0.36, _wrap(summary[:1].upper() + summary[1:] + ".", 60),
              fontsize=7.5, va="top")
-    fig.text(0.54, 0.36, _wrap(
+    fig.text(0.54, 0.26, _wrap(
         "Found: the share of the 95 % intervals' posterior draws that found a lesion on "
         "that stretch. A narrowing in the first or last 5 mm of a segment, or in a branch's "
         "ostium zone, is a lesion only when the profile past the zone shows it too; below "

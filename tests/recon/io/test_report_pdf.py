@@ -74,10 +74,9 @@ def test_written_whole_as_part_of_the_output_set(case, tmp_path) -> None:
 
 # ------------------------------------------------------------ the whole tree
 @pytest.fixture(scope="module")
-def tree_pdf(tmp_path_factory):
-    """`coronary3d reconstruct --demo --report` on the demo with its side branch clicked."""
-    import json
-
+def tree_out(tmp_path_factory):
+    """`coronary3d reconstruct --demo --report` on the demo with its side branch clicked:
+    the output folder."""
     from recon.io.seeds_file import save_seeds
     from recon.synth import make_phantom
     from recon.synth.tree_case import tree_seeds
@@ -88,8 +87,16 @@ def tree_pdf(tmp_path_factory):
     proc = run_cli("reconstruct", "--demo", "--seeds", str(root / "seeds.json"), "--report",
                    "--quiet", "--out", str(root / "out"))
     assert proc.returncode == 0, proc.stderr
-    report = json.loads((root / "out" / "report.json").read_text())
-    pages = [p.extract_text() for p in pypdf.PdfReader(root / "out" / "report.pdf").pages]
+    return root / "out"
+
+
+@pytest.fixture(scope="module")
+def tree_pdf(tree_out):
+    """Its report.json and the PDF's pages' text."""
+    import json
+
+    report = json.loads((tree_out / "report.json").read_text())
+    pages = [p.extract_text() for p in pypdf.PdfReader(tree_out / "report.pdf").pages]
     return report, pages
 
 
@@ -151,3 +158,123 @@ def test_write_report_pdf_is_the_pages_call(case, tmp_path):
     # without the images the traces are still drawn, and it says so
     path = write_report_pdf(rec, tmp_path / "no-images.pdf")
     assert "image not given" in pypdf.PdfReader(path).pages[0].extract_text()
+
+
+# ------------------------------------------------------------ the FFR (issue 47)
+def _flat(text: str) -> str:
+    return re.sub(r"\s+", " ", text)
+
+
+def _expected_ffr_line(distal: float, ci: list[float], band: list[float]) -> str:
+    lo, hi = sorted(band)
+    return (f"FFR (model estimate, research use only) {distal:.2f} (95 % {ci[0]:.2f}–"
+            f"{ci[1]:.2f}); flow assumption 0.25–0.45 m/s: {lo:.2f}–{hi:.2f} (not a "
+            "confidence interval)")
+
+
+def test_the_pdf_has_each_segments_ffr_line_and_the_research_sentence(tree_pdf):
+    report, pages = tree_pdf
+    overview = _flat(pages[0])
+    for branch, page in zip(report["branches"], pages[1:], strict=True):
+        ffr = branch["ffr"]
+        assert ffr is not None and ffr["ci95"] is not None, branch["inputs"]["segment"]
+        page = _flat(page)
+        assert _expected_ffr_line(ffr["distal"], ffr["ci95"], ffr["flow_band"]["ffr"]) in page
+        assert "not validated against a pressure wire here" in page
+        assert "It must not guide treatment." in page
+        assert "0.80 cut-off" in page and "(not a confidence interval)" in page
+        # the overview's table and the segment's table: the same value and interval
+        value = f"{ffr['distal']:.2f} ({ffr['ci95'][0]:.2f}–{ffr['ci95'][1]:.2f})"
+        assert value in overview and value in page
+    assert "FFR (model)" in overview
+
+
+def _ffr_axes(fig):
+    (ax,) = [a for a in fig.axes if a.get_ylabel() == "FFR pullback"]
+    return ax
+
+
+def test_the_pullback_chart_draws_the_ffr_its_interval_the_flow_band_and_the_cut_off(case):
+    from matplotlib.collections import PolyCollection
+
+    from recon.io.report_pdf import segment_figure
+
+    rec, _, _ = case
+    ffr = rec.ffr
+    assert ffr is not None and ffr.ffr_lo is not None
+    fig = segment_figure(rec, rec)
+    ax = _ffr_axes(fig)
+    (diameter_ax,) = [a for a in fig.axes if a.get_title() == "Diameter profile"]
+    assert ax.get_xlim() == diameter_ax.get_xlim()  # one distance scale for both charts
+    lines = {ln.get_label(): ln for ln in ax.get_lines()}
+    curve = lines["FFR (model estimate)"]
+    assert np.array_equal(curve.get_xdata(), ffr.s_mm)
+    assert np.array_equal(curve.get_ydata(), ffr.ffr)
+    dashed = [ln for ln in ax.get_lines() if ln.get_linestyle() == "--"]
+    assert len(dashed) == 2
+    for ln, row in zip(dashed, ffr.band, strict=True):
+        assert np.array_equal(ln.get_ydata(), row)
+    assert dashed[0].get_label() == \
+        "flow assumption 0.25–0.45 m/s (not a confidence interval)"
+    cut = lines["0.80 cut-off"]
+    assert list(cut.get_ydata()) == [0.8, 0.8]
+    (band,) = [c for c in ax.collections if isinstance(c, PolyCollection)
+               and c.get_label() == "95 % interval"]
+    ys = band.get_paths()[0].vertices[:, 1]
+    assert np.isclose(ys.min(), ffr.ffr_lo.min()) and np.isclose(ys.max(), ffr.ffr_hi.max())
+    low, high = ax.get_ylim()
+    assert low <= min(0.7, float(ffr.ffr_lo.min())) and high > 1.0
+    assert all(t <= 1.0 + 1e-9 for t in ax.get_yticks())  # no tick above FFR 1
+
+
+def test_where_the_ffr_was_not_computed_the_pdf_says_why(case, tmp_path):
+    """As recon.pipeline leaves it when the model refuses the lumen: ffr None and the
+    reason among the warnings."""
+    from dataclasses import replace
+
+    from recon.io.report_pdf import write_report_pdf
+
+    rec, a, b = case
+    reason = ("FFR: segment 'diagonal branch': the lumen closes at 20.0 mm (area 0.004 "
+              "mm^2); no flow can be modelled through it")
+    off = replace(rec, ffr=None, warnings=(*rec.warnings, f"FFR not computed: {reason}"))
+    path = write_report_pdf(off, tmp_path / "no-ffr.pdf", a.image, b.image)
+    overview, page = (_flat(p.extract_text()) for p in pypdf.PdfReader(path).pages)
+    assert ("FFR not computed: segment 'diagonal branch': the lumen closes at 20.0 mm"
+            in page)
+    assert "no FFR pullback: the FFR was not computed" in page
+    assert "FFR (model estimate, research use only)" not in page
+    assert "not computed" in overview and "FFR not computed" in overview  # its table, warnings
+    bare = replace(rec, ffr=None)  # no reason recorded: said, not made up
+    from recon.io.report_pdf import ffr_not_computed
+
+    assert ffr_not_computed(bare) == "FFR not computed: no reason was recorded"
+
+
+def test_a_report_page_renders_with_the_pullback_drawn(tree_out):
+    """The main's page rasterised (pdftoppm, else pypdfium2) into test-artifacts/report/
+    to be looked at; the FFR curve's navy is drawn inside the pullback chart's rows."""
+    import shutil
+    import subprocess
+    from pathlib import Path
+
+    from PIL import Image
+
+    repo = Path(__file__).resolve().parents[3]
+    out = repo / "test-artifacts" / "report"
+    out.mkdir(parents=True, exist_ok=True)
+    pdf = tree_out / "report.pdf"
+    png = out / "tree-main-page.png"
+    if shutil.which("pdftoppm"):
+        subprocess.run(["pdftoppm", "-png", "-r", "100", "-f", "2", "-l", "2", "-singlefile",
+                        str(pdf), str(png.with_suffix(""))], check=True)
+    else:
+        pdfium = pytest.importorskip("pypdfium2", reason="neither pdftoppm nor pypdfium2")
+        pdfium.PdfDocument(str(pdf))[1].render(scale=100 / 72).to_pil().save(png)
+    image = np.asarray(Image.open(png).convert("RGB")).astype(int)
+    h, w, _ = image.shape
+    assert abs(h / w - 11.69 / 8.27) < 0.01  # A4 portrait
+    navy = (abs(image[..., 0]) < 40) & (abs(image[..., 1]) < 40) & (image[..., 2] > 90)
+    rows = np.flatnonzero(navy.any(axis=1)) / h  # from the top
+    in_chart = (rows > 1 - 0.605) & (rows < 1 - 0.475)
+    assert in_chart.sum() >= 5  # the curve (FFR and its 'distal' label) drawn in the chart
