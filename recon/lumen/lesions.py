@@ -18,10 +18,12 @@ says which are lesions (supported). Here:
   the lesions whose interval reaches it are named. Without intervals (no posterior)
   two or more lesions are ambiguous: nothing tells them apart.
 - :func:`ostium_zone_end_s_mm`: how far past a branch's carina its parent's lumen
-  stays within the reach of the 2D radius fits in either view (the half-width of
+  stays within the reach of the 2D radius fits in every view (the half-width of
   the branch's profile window, :mod:`recon.trace.profile_fit`): a fit
   whose window holds the parent's edge reads the branch too narrow there (on the
-  demo's healthy side branch, 30 % too narrow 1 mm past the carina). A narrowing
+  demo's healthy side branch, 30 % too narrow 1 mm past the carina). Where one view
+  is clear the sections take that view's radius (the tree's overlap marking), so the
+  zone ends there: a true ostial lesion seen in the clear view is measured. A narrowing
   there is a lesion only when the profile past the zone supports it
   (:mod:`recon.lumen.measure`).
 """
@@ -271,7 +273,7 @@ def ostium_zone_end_s_mm(
 
     The zone runs from the carina to the first point from which, for
     :data:`OSTIUM_CLEAR_RUN_MM`, the parent's projected lumen edge lies beyond the
-    reach of the branch's profile fit in every view; it is at most
+    reach of the branch's profile fit in at least one view; it is at most
     :data:`OSTIUM_ZONE_MAX_FRACTION` of the branch past the carina.
     """
     from recon.correspond.triangulation import radius_mm_eq11
@@ -281,7 +283,7 @@ def ostium_zone_end_s_mm(
     s = np.asarray(s_mm, dtype=float)
     P = np.asarray(parent_X_world, dtype=float)
     r_p = np.asarray(parent_radius_mm, dtype=float)
-    near = np.zeros(len(s), dtype=bool)
+    near = np.ones(len(s), dtype=bool)
     for view in views:
         q, qp = view.project(X), view.project(P)
         mm_b = radius_mm_eq11(np.ones(len(X)), X, view)  # mm per px at each point
@@ -289,7 +291,7 @@ def ostium_zone_end_s_mm(
         r_b_px = float(np.median(radius_mm / mm_b))
         reach = half_width_for(r_b_px)
         gap = np.linalg.norm(q[:, None, :] - qp[None, :, :], axis=2) - (r_p / mm_p)[None, :]
-        near |= gap.min(axis=1) < reach
+        near &= gap.min(axis=1) < reach
     start = int(np.searchsorted(s, from_s_mm))
     cap = from_s_mm + OSTIUM_ZONE_MAX_FRACTION * (s[-1] - from_s_mm)
     step = float(np.median(np.diff(s))) if len(s) > 1 else 1.0

@@ -131,6 +131,11 @@ def test_the_ostium_zone_ends_where_the_parent_leaves_the_fits_reach():
     reach_mm = half_width_for(1.0 / px_mm) * px_mm
     expected = (1.5 + reach_mm) / np.sin(theta)
     assert end == pytest.approx(expected, abs=0.6)
+    # a view that looks down the branch sees it over the parent all along: the zone still
+    # ends where view A is clear (the sections take A's radius there)
+    vc = ViewGeometry(90.0, 60.0, 1000.0, 750.0, (0.3, 0.3), 512, 512)
+    assert ostium_zone_end_s_mm(branch, s, 1.0, parent, r_parent, (va, vc), 2.0) == (
+        pytest.approx(expected, abs=0.6))
     # never more than half of the branch past the carina
     assert ostium_zone_end_s_mm(branch, s, 1.0, parent, np.full(241, 40.0), (va,), 2.0) == (
         pytest.approx(2.0 + 0.5 * (s[-1] - 2.0)))
