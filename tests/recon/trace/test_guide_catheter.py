@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from tests.recon.test_centerline import distance_to, render, segment
+from tests.recon.trace.test_centerline import distance_to, render, segment
 
 import recon.trace.trace_path as trace_path
 from recon.trace.centerline import trace_segment
