@@ -21,9 +21,9 @@ BENCHES = ("centerline", "calibration", "matching", "reconstruct", "speed", "int
 
 
 #: Parameters after (cases, seed): the suite for the benches that take --suite varied,
-#: and the click jitter and the Dask workers of bench reconstruct.
+#: and the click jitter, the Dask workers and the tracer of bench reconstruct.
 EXTRA = {"centerline": {"suite": "regular"},
-         "reconstruct": {"suite": "regular", "jitter": 0, "workers": None},
+         "reconstruct": {"suite": "regular", "jitter": 0, "workers": None, "tracer": "2d"},
          "intervals": {"workers": None, "checkpoint": None},
          "calibration_modes": {"suite": "regular", "workers": None}}
 
