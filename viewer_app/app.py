@@ -123,6 +123,7 @@ class ViewerApp(MarkEditing, RunCommands):
         self.clicks_handled = 0  # image clicks the server has finished with (marks or not)
         self.reconstruction: Result | None = None  # one segment's, or a tree's (all segments)
         self.shown_branch = 0  # index in its branches of the one the results panel shows
+        self.ffr_colouring = False  # the model coloured by FFR ("Colour the model by FFR")
         self.calibration: CalibrationResult | None = None
         self.calibration_seeds: Seeds | None = None  # the marks it is of
         self.run_angios: tuple[Angiogram, Angiogram] | None = None  # the reconstruction's

@@ -147,6 +147,8 @@ class ResultsPanel:
     progress: viser.GuiProgressBarHandle
     stale: viser.GuiMarkdownHandle  # "out of date" when the marks changed since; hidden
     layout: viser.GuiDropdownHandle  # Angiograms / Angiograms + 3D / 3D model
+    ffr_colour: viser.GuiCheckboxHandle  # the model coloured by FFR (else by diameter)
+    ffr_key: viser.GuiImageHandle  # the FFR colour key, shown while the model has them
     branch: viser.GuiDropdownHandle  # a tree's branch shown (the Segment dropdown's twin)
     branch_note: viser.GuiMarkdownHandle  # which branch the table and chart are of
     warnings: viser.GuiMarkdownHandle  # the result's warnings (report.json's), hidden if none
@@ -156,6 +158,8 @@ class ResultsPanel:
     lesion_end: viser.GuiSliderHandle
     reference_proximal: viser.GuiSliderHandle  # where the reference diameter is read
     reference_distal: viser.GuiSliderHandle
+    ffr_plot: viser.GuiImageHandle  # the FFR pullback of the branch shown
+    ffr_note: viser.GuiMarkdownHandle  # research use (or why no FFR), under the chart
     bifurcations: viser.GuiMarkdownHandle  # a tree's bifurcation QCA
     markdown: viser.GuiMarkdownHandle  # engineering figures, in a folded folder
 
@@ -449,6 +453,21 @@ def results_folder(gui: viser.GuiApi, app: PageCommands, refreshing: Refreshing)
                 return
             app.guard("Show", event.client, lambda: app.set_layout(str(layout.value)))
 
+        ffr_colour = gui.add_checkbox(
+            "Colour the model by FFR", False, visible=False,
+            hint="FFR: a model estimate for research, not validated against a pressure "
+                 "wire. Unticked: coloured by lumen diameter (a tree: by branch).")
+
+        @ffr_colour.on_update
+        def _(event: viser.GuiEvent) -> None:
+            if refreshing.active or event.client is None:
+                return
+            app.guard("FFR colours", event.client,
+                      lambda: app.set_ffr_colouring(bool(ffr_colour.value), event.client))
+
+        # charts and keys as PNG: JPEG blurs their thin lines and small text
+        ffr_key = gui.add_image(np.full((8, 8, 3), 255, np.uint8), format="png",
+                                visible=False)
         branch = gui.add_dropdown("Branch", ["Segment 1"], visible=False)
 
         @branch.on_update
@@ -460,7 +479,7 @@ def results_folder(gui: viser.GuiApi, app: PageCommands, refreshing: Refreshing)
         branch_note = gui.add_markdown("", visible=False)
         warnings = gui.add_markdown("", visible=False)
         clinical = gui.add_markdown("")
-        plot = gui.add_image(np.full((8, 8, 3), 255, np.uint8),
+        plot = gui.add_image(np.full((8, 8, 3), 255, np.uint8), format="png",
                              label="Diameter along the vessel", visible=False)
         lesion_start = gui.add_slider("Lesion start (mm)", 0.0, 1.0, 0.1, 0.0, visible=False)
         lesion_end = gui.add_slider("Lesion end (mm)", 0.0, 1.0, 0.1, 1.0, visible=False)
@@ -476,6 +495,9 @@ def results_folder(gui: viser.GuiApi, app: PageCommands, refreshing: Refreshing)
 
         for slider in (lesion_start, lesion_end, ref_prox, ref_dist):
             slider.on_update(lesion_moved)
+        ffr_plot = gui.add_image(np.full((8, 8, 3), 255, np.uint8), format="png",
+                                 label="FFR along the vessel", visible=False)
+        ffr_note = gui.add_markdown("", visible=False)
         bifurcations = gui.add_markdown("", visible=False)
         with gui.add_folder("Details (engineering)", expand_by_default=False):
             markdown = gui.add_markdown("")
@@ -484,7 +506,9 @@ def results_folder(gui: viser.GuiApi, app: PageCommands, refreshing: Refreshing)
                         clinical=clinical,
                         plot=plot, lesion_start=lesion_start,
                         lesion_end=lesion_end, reference_proximal=ref_prox,
-                        reference_distal=ref_dist, bifurcations=bifurcations,
+                        reference_distal=ref_dist, ffr_colour=ffr_colour,
+                        ffr_key=ffr_key, ffr_plot=ffr_plot, ffr_note=ffr_note,
+                        bifurcations=bifurcations,
                         markdown=markdown)
 
 

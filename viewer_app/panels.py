@@ -37,8 +37,9 @@ from viewer_app.folders import (
     seeds_folder,
 )
 from viewer_app.marks import MODE_LABELS
+from viewer_app.model_colours import ffr_key_image
 from viewer_app.patients import PATIENTS_DIFFER_TEXT
-from viewer_app.plot import profile_plot
+from viewer_app.plot import ffr_plot, profile_plot
 from viewer_app.results import (
     NO_RECONSTRUCTION_TEXT,
     NOT_CALIBRATED_TEXT,
@@ -46,6 +47,7 @@ from viewer_app.results import (
     calibration_markdown,
     clinical_markdown,
     close_views_warning,
+    ffr_note,
     info_markdown,
     marks_markdown,
     results_markdown,
@@ -203,7 +205,8 @@ class Panels:
         r.markdown.content = NO_RECONSTRUCTION_TEXT
         self.calibrate.markdown.content = NOT_CALIBRATED_TEXT
         for h in (r.plot, r.lesion_start, r.lesion_end, r.reference_proximal,
-                  r.reference_distal, r.branch, r.branch_note, r.bifurcations, r.warnings):
+                  r.reference_distal, r.branch, r.branch_note, r.bifurcations, r.warnings,
+                  r.ffr_colour, r.ffr_key, r.ffr_plot, r.ffr_note):
             h.visible = False
         r.warnings.content = ""
 
@@ -245,6 +248,26 @@ class Panels:
                 h.visible = True
         self.show_lesion(rec, None)
         r.plot.visible = True
+
+    def show_ffr(self, rec: Reconstruction, available: bool, coloured: bool) -> None:
+        """The FFR of the branch shown: its pullback chart with the research-use lines
+        under it, or why it was not computed (no chart); the "Colour the model by FFR"
+        box (ticked when ``coloured``, disabled unless the result has an FFR,
+        ``available``) and the colour key while the model is coloured by FFR."""
+        r = self.results
+        has = getattr(rec, "ffr", None) is not None
+        if has:
+            r.ffr_plot.image = ffr_plot(rec, width=440, height=346)
+        r.ffr_plot.visible = has
+        r.ffr_note.content = ffr_note(rec)
+        r.ffr_note.visible = True
+        with self.refreshing.during():
+            r.ffr_colour.value = coloured and available
+        r.ffr_colour.disabled = not available
+        r.ffr_colour.visible = True
+        if coloured and available:
+            r.ffr_key.image = ffr_key_image()
+        r.ffr_key.visible = coloured and available
 
     def show_lesion(self, rec: Reconstruction, lesion: dict[str, float] | None) -> None:
         """The clinical table and the chart for the automatic or hand-set lesion ends."""

@@ -13,7 +13,7 @@ FloatArray = NDArray[np.float64]
 if TYPE_CHECKING:
     from recon.pipeline import Reconstruction
 
-__all__ = ["profile_plot"]
+__all__ = ["ffr_plot", "profile_plot"]
 
 
 def _nice_step(span: float, target: int) -> float:
@@ -161,3 +161,137 @@ def _flagged_stretches(rec: Reconstruction) -> list[tuple[tuple[float, float],
         out += [((b["start_mm"], b["end_mm"]), BRANCH_BAND, "branch")
                 for b in branch_stretches(rec)]
     return out
+
+
+FFR_CURVE = (20, 40, 130)  # the FFR pullback (navy)
+FFR_INTERVAL = (200, 216, 248)  # its 95 % interval, shaded
+FFR_BAND = (230, 120, 0)  # the flow assumption's two pullbacks, dashed
+FFR_CUT = (200, 20, 60)  # the 0.80 cut-off
+FFR_LESION = (255, 232, 232)  # a lesion's stretch, numbered
+
+
+def _dashed(img: NDArray[np.uint8], pts: NDArray[np.int32], colour: tuple[int, int, int],
+            dash_px: float = 7.0, gap_px: float = 5.0) -> None:
+    """A dashed polyline through ``pts`` (N, 2) px: dashes of ``dash_px`` every
+    ``dash_px + gap_px`` along its length."""
+    p = np.asarray(pts, float)
+    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(p, axis=0), axis=1))])
+    for start in np.arange(0.0, s[-1], dash_px + gap_px):
+        at = np.linspace(start, min(start + dash_px, s[-1]), 6)
+        seg = np.column_stack([np.interp(at, s, p[:, 0]), np.interp(at, s, p[:, 1])])
+        cv2.polylines(img, [seg.round().astype(np.int32)], False, colour, 2, cv2.LINE_AA)
+
+
+def ffr_plot(rec: Reconstruction, width: int = 440, height: int = 346) -> NDArray[np.uint8]:
+    """The FFR pullback as an RGB image (H, W, 3), on the diameter chart's arc length (the
+    same margins, so the two line up): the FFR along the vessel (a model estimate for
+    research, recon.lumen.ffr), its 95 % interval shaded, the pullbacks at the two
+    velocities of the flow assumption dashed (not a confidence interval), a line at the
+    0.80 cut-off, the lesions' stretches numbered, the distal value; a legend below.
+    ``rec.ffr`` must not be None."""
+    from recon.io.report_pdf import FFR_CUTOFF
+
+    ffr = rec.ffr
+    s = np.asarray(ffr.s_mm, float)
+    values = np.asarray(ffr.ffr, float)
+    band = np.asarray(ffr.band, float).reshape(-1, len(s)) if np.size(ffr.band) else \
+        np.zeros((0, len(s)))
+    has_ci = ffr.ffr_lo is not None and ffr.ffr_hi is not None
+    img = np.full((height, width, 3), 255, np.uint8)
+    font, ink, grey = cv2.FONT_HERSHEY_SIMPLEX, (40, 40, 40), (60, 60, 60)
+    # (bottom: the legend, and room under it for the page's full-screen button)
+    left, right, top, bottom = 56, 14, 34, 114
+    s_all = np.asarray(rec.profile.s_mm, float)
+    x0, x1 = float(min(s_all.min(), s.min())), float(max(s_all.max(), s.max()))
+    x1 = max(x1, x0 + 1e-6)
+    shown = [values, *band] + ([np.asarray(ffr.ffr_lo, float)] if has_ci else [])
+    lowest = float(min(np.nanmin(v) for v in shown))
+    y0 = max(0.0, np.floor(min(0.7, lowest - 0.03) * 20.0) / 20.0)
+    y1 = 1.02
+
+    def px(sv: NDArray, fv: NDArray) -> NDArray[np.int32]:
+        xs = left + (np.asarray(sv, float) - x0) / (x1 - x0) * (width - left - right)
+        ys = height - bottom - (np.asarray(fv, float) - y0) / (y1 - y0) * (
+            height - top - bottom)
+        return np.stack([xs, ys], axis=-1).round().astype(np.int32)
+
+    y_top, y_bottom = top, height - bottom
+    cv2.putText(img, "FFR pullback (model estimate, research use)", (4, 17), font, 0.5, ink,
+                1, cv2.LINE_AA)
+    report = getattr(rec, "lesions", None)
+    for les in getattr(report, "lesions", ()):  # behind everything else
+        n = les.narrowing
+        a, b = px(np.array([n.start_s_mm, n.end_s_mm]), np.full(2, y0))
+        cv2.rectangle(img, (int(a[0]), y_top), (max(int(b[0]), int(a[0]) + 1), y_bottom),
+                      FFR_LESION, -1)
+        label = str(les.number)
+        w = cv2.getTextSize(label, font, 0.45, 2)[0][0]
+        cv2.putText(img, label, ((int(a[0]) + int(b[0])) // 2 - w // 2, y_top - 4), font,
+                    0.45, FFR_CUT, 2, cv2.LINE_AA)
+    step = 0.05 if y0 >= 0.5 else 0.1
+    for yv in np.arange(np.ceil(y0 / step - 1e-9) * step, 1.0 + 1e-9, step):
+        y = int(px(np.array([x0]), np.array([yv]))[0, 1])
+        cv2.line(img, (left, y), (width - right, y), (235, 235, 235), 1)
+        if abs(yv - FFR_CUTOFF) > 0.02:  # the cut-off is labelled in its own colour
+            cv2.putText(img, f"{yv:.2f}", (left - 44, y + 5), font, 0.48, grey, 1,
+                        cv2.LINE_AA)
+    if has_ci:  # the 95 % interval: a filled band between its low and high pullbacks
+        poly = np.concatenate([px(s, np.asarray(ffr.ffr_hi, float)),
+                               px(s[::-1], np.asarray(ffr.ffr_lo, float)[::-1])])
+        cv2.fillPoly(img, [poly], FFR_INTERVAL, cv2.LINE_AA)
+    y_cut = int(px(np.array([x0]), np.array([FFR_CUTOFF]))[0, 1])
+    cv2.line(img, (left, y_cut), (width - right, y_cut), FFR_CUT, 1)  # horizontal: no anti-aliasing
+    cv2.putText(img, f"{FFR_CUTOFF:.2f}", (left - 44, y_cut + 5), font, 0.48, FFR_CUT, 2,
+                cv2.LINE_AA)
+    for row in band:
+        _dashed(img, px(s, row), FFR_BAND)
+    cv2.polylines(img, [px(s, values)], False, FFR_CURVE, 2, cv2.LINE_AA)
+    cv2.rectangle(img, (left, y_top), (width - right, y_bottom), (120, 120, 120), 1)
+    x_step = _nice_step(x1 - x0, 6)
+    for xv in np.arange(np.ceil(x0 / x_step) * x_step, x1 + 1e-9, x_step):
+        x = int(px(np.array([xv]), np.array([y0]))[0, 0])
+        cv2.putText(img, f"{xv:g}", (x - 8, y_bottom + 17), font, 0.48, grey, 1, cv2.LINE_AA)
+    cv2.putText(img, "distance along the 3D centerline (mm)", (left, y_bottom + 34), font,
+                0.46, ink, 1, cv2.LINE_AA)
+    ci = ffr.ci95
+    distal = f"FFR (model estimate): distal {ffr.distal:.2f}" + (
+        "" if ci is None else f" (95 % {ci[0]:.2f}-{ci[1]:.2f})")
+    _ffr_legend(img, (6, y_bottom + 52), distal, has_ci, tuple(ffr.model.flow_band_m_s),
+                len(band) > 0, FFR_CUTOFF)
+    return img
+
+
+def _ffr_legend(img: NDArray[np.uint8], at: tuple[int, int], curve: str, has_ci: bool,
+                velocities_m_s: tuple[float, float], has_band: bool, cutoff: float) -> None:
+    """The FFR chart's legend from ``at`` (x, y) px down: a sample of each line with its
+    meaning (``curve``: the FFR's, with its distal value), the interval, cut-off and
+    lesion on one row, the flow assumption's band below."""
+    font, ink = cv2.FONT_HERSHEY_SIMPLEX, (40, 40, 40)
+    x, y = at
+    third = (img.shape[1] - x) // 3
+
+    def sample(kind: str, x0: int, yy: int) -> None:
+        if kind == "curve":
+            cv2.line(img, (x0, yy - 4), (x0 + 24, yy - 4), FFR_CURVE, 2, cv2.LINE_AA)
+        elif kind == "interval":
+            cv2.rectangle(img, (x0, yy - 9), (x0 + 24, yy + 1), FFR_INTERVAL, -1)
+        elif kind == "lesion":
+            cv2.rectangle(img, (x0, yy - 9), (x0 + 24, yy + 1), FFR_LESION, -1)
+        elif kind == "cut":
+            cv2.line(img, (x0, yy - 4), (x0 + 24, yy - 4), FFR_CUT, 1)
+        elif kind == "band":
+            _dashed(img, np.array([[x0, yy - 4], [x0 + 26, yy - 4]]), FFR_BAND, 7.0, 4.0)
+
+    rows = [[("curve", curve)],
+            [("interval" if has_ci else "", "95 % interval" if has_ci else "(no interval)"),
+             ("cut", f"{cutoff:.2f} cut-off"), ("lesion", "lesion")]]
+    if has_band:
+        v0, v1 = velocities_m_s
+    rows.append([("band", f"flow assumption {v0:g}-{v1:g} m/s, not a confidence "
+                              "interval")])
+    for k, row in enumerate(rows):
+        yy = y + 17 * k
+        for j, (kind, text) in enumerate(row):
+            x0 = x + j * third
+            sample(kind, x0, yy)
+            cv2.putText(img, text, (x0 + 30, yy), font, 0.46, ink, 1, cv2.LINE_AA)

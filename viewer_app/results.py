@@ -34,6 +34,8 @@ __all__ = [
     "close_views_warning",
     "lesion_measurements",
     "lesions_lines",
+    "ffr_note",
+    "ffr_rows",
     "fmt",
     "info_markdown",
     "input_warning_lines",
@@ -386,7 +388,8 @@ def clinical_markdown(rec: Reconstruction, lesion: dict[str, float] | None = Non
             + f", from {v['lesion_start_s_mm']:.1f} to {v['lesion_end_s_mm']:.1f} mm |",
             f"| MLD position | {v['mld_s_mm']:.1f} mm from the proximal end |",
             "| Segment length | "
-            + _with_ci(f"{m.segment_length_mm:.1f} mm", "segment_length_mm", ci_all, 1) + " |"]
+            + _with_ci(f"{m.segment_length_mm:.1f} mm", "segment_length_mm", ci_all, 1) + " |",
+            *ffr_rows(rec)]
     best = getattr(rec, "optimal_view", None)
     if best is not None:
         fs = best.current_foreshortening_pct
@@ -401,6 +404,40 @@ def clinical_markdown(rec: Reconstruction, lesion: dict[str, float] | None = Non
         rows += lesions_lines(rec)
     rows += _caveats(rec, v)
     return "\n".join(rows)
+
+
+def ffr_rows(rec: Reconstruction) -> list[str]:
+    """The FFR's rows of the clinical table (recon.lumen.ffr, a model estimate for
+    research): the distal value with its 95 % interval and the band over the assumed
+    flow, said not to be a confidence interval; or why it was not computed."""
+    from recon.io.report_pdf import ffr_not_computed
+
+    ffr = getattr(rec, "ffr", None)
+    if ffr is None:
+        reason = ffr_not_computed(rec).removeprefix("FFR not computed: ")
+        return [f"| FFR (model estimate for research) | not computed: {reason} |"]
+    ci = ffr.ci95
+    v0, v1 = ffr.model.flow_band_m_s
+    lo, hi = ffr.flow_band
+    return [f"| FFR, distal (model estimate for research) | **{ffr.distal:.2f}**"
+            + (f" (95 % {ci[0]:.2f}–{ci[1]:.2f})" if ci is not None else
+               " (no 95 % interval)") + " |",
+            f"| FFR over the flow assumption ({v0:g}–{v1:g} m/s) | {lo:.2f}–{hi:.2f}, not a "
+            "confidence interval |"]
+
+
+def ffr_note(rec: Reconstruction) -> str:
+    """The lines beside the FFR chart: that the FFR is a model estimate for research, not
+    validated against a pressure wire; or, with no FFR, why it was not computed."""
+    from recon.io.report_pdf import ffr_not_computed
+    from recon.lumen.ffr import RESEARCH_NOTE
+
+    if getattr(rec, "ffr", None) is None:
+        return f"⚠ **{ffr_not_computed(rec)}**"
+    return (f"⚠ **Research use only.** The FFR is {RESEARCH_NOTE}. It must not guide "
+            "treatment. Blue band: its 95 % interval (the geometry's uncertainty); orange "
+            "dashes: the FFR at the lowest and highest assumed hyperemic flow, which is "
+            "not a confidence interval.")
 
 
 def lesions_lines(rec: Reconstruction) -> list[str]:

@@ -52,6 +52,7 @@ class RunCommands:
     model: ModelNodes | None
     lesion: dict[str, float] | None
     shown_branch: int
+    ffr_colouring: bool  # the model coloured by FFR (the page's box), kept across runs
     progress_log: list[tuple[str, float]]
     _busy: bool
     patients_differ: bool  # files A and B name different patients ...
@@ -201,7 +202,7 @@ class RunCommands:
         table and the profile; the page shows the angiograms and the model."""
         current = self.state.segment_names[self.state.current_segment]
         self.model, self.shown_branch = tree_view.draw_result(
-            self.server.scene, self.views, rec, current)
+            self.server.scene, self.views, rec, current, self.ffr_colouring)
         self._show_branch(rec, self.shown_branch, redraw=False)
         self.lesion = None
         self.set_layout("Angiograms + 3D")
@@ -211,10 +212,30 @@ class RunCommands:
         tree's branch line and bifurcations) and, with ``redraw``, that branch highlighted
         on the images and the model."""
         if redraw:
-            tree_view.highlight_branch(self.server.scene, self.views, rec, self.model, index)
-        self.panels.show_reconstruction(tree_view.branches_of(rec)[index])
+            tree_view.highlight_branch(self.server.scene, self.views, rec, self.model, index,
+                                       self.ffr_colouring)
+        branch = tree_view.branches_of(rec)[index]
+        self.panels.show_reconstruction(branch)
+        self.panels.show_ffr(branch, tree_view.has_ffr(rec), self.ffr_colouring)
         self.panels.show_tree(rec, index)
         self.panels.show_warnings(rec)  # the whole result's (a rename renames them too)
+
+    def set_ffr_colouring(self, on: bool, client: object | None = None) -> bool:
+        """Colour the model by FFR (``on``: each vertex the FFR of its nearest centerline
+        point, each branch's own; a model estimate for research) or as first drawn (a
+        segment by diameter, a tree by branch); the choice holds for later Reconstructs.
+        Returns whether the model shown is coloured by FFR (False without a model or an
+        FFR)."""
+        with self._lock:
+            self.ffr_colouring = bool(on)
+            rec = self.reconstruction
+            if rec is None or self.model is None:
+                return False
+            shown = tree_view.paint_model(self.server.scene, rec, self.model,
+                                          self.shown_branch, self.ffr_colouring)
+            self.panels.show_ffr(tree_view.branches_of(rec)[self.shown_branch],
+                                 tree_view.has_ffr(rec), self.ffr_colouring)
+            return shown
 
     @property
     def branch(self) -> Reconstruction | None:

@@ -34,6 +34,7 @@ import numpy as np
 import viser
 from numpy.typing import NDArray
 
+from viewer_app.model_colours import diameter_colors, segment_diameter_colors
 from viewer_app.placing import MLD_PLACES, label_places, name_place
 from viewer_app.results import angle_text
 
@@ -56,6 +57,8 @@ __all__ = [
     "draw_catheters",
     "draw_refusal",
     "draw_reconstruction",
+    "segment_title",
+    "title_position",
     "model_placement",
     "diameter_colors",
     "lesion_points",
@@ -307,19 +310,6 @@ def _remove(scene: viser.SceneApi, names: list[str]) -> None:
             log.debug("nothing to remove at %s", name, exc_info=True)
 
 
-def diameter_colors(d_mm: FloatArray, ref_mm: float | FloatArray) -> NDArray[np.uint8]:
-    """RGB (N, 3) for lumen diameters (N,) against their reference diameters (a scalar
-    or (N,), the tapering healthy reference at each point): red at or below half the
-    reference, yellow at 75 %, green at the reference and above (the usual QCA colour
-    scale)."""
-    ref = np.maximum(np.asarray(ref_mm, float), 1e-6)
-    r = np.clip(np.asarray(d_mm, float) / ref, 0.5, 1.0)
-    stops = np.array([0.5, 0.75, 1.0])
-    rgb = np.stack([np.interp(r, stops, [220, 240, 40]), np.interp(r, stops, [30, 200, 180]),
-                    np.interp(r, stops, [30, 40, 70])], axis=1)
-    return rgb.round().astype(np.uint8)
-
-
 @dataclass(frozen=True)
 class ModelNodes:
     """The ``/model`` frame, where it sits (scene units) and how world mm map to it."""
@@ -425,16 +415,26 @@ def model_placement(V_world: FloatArray, R_view_from_world: FloatArray,
     return T, model_position, centre
 
 
+def segment_title(rec: Reconstruction) -> str:
+    """The line over a segment's model coloured by diameter."""
+    return (f"3D model, {rec.measurements.segment_length_mm:.1f} mm; drag to rotate\n"
+            "green = reference diameter, red = half of it")
+
+
+def title_position(centre: FloatArray) -> tuple[float, float, float]:
+    """Where the model's title goes: centred over it (the notifications, top left, would
+    cover a left-aligned title), a line above its box (its top end reaches the box's
+    edge); ``centre``: ModelNodes.position."""
+    return float(centre[0]), float(centre[1]) - MODEL_SIZE / 2 - 0.04, 0.0
+
+
 def draw_reconstruction(
     scene: viser.SceneApi, views: Mapping[str, View], rec: Reconstruction
 ) -> ModelNodes:
     """Traces, back-projections, MLD and lesion ends on the images; the mesh coloured by
     lumen diameter with the MLD marked, and the 3D centerline, above the images."""
-    from scipy.spatial import cKDTree
-
     draw_refusal(scene, views, None)  # a reconstruction replaces a refusal's ring
     X = np.asarray(rec.centerline_3d.X_world, dtype=float)
-    s = np.asarray(rec.centerline_3d.s_mm, dtype=float)
     for key, cl, geom in (("a", rec.centerline_a, rec.view_a), ("b", rec.centerline_b,
                                                                 rec.view_b)):
         v = views[key]
@@ -445,16 +445,9 @@ def draw_reconstruction(
     draw_flagged(scene, views, rec)
     draw_catheters(scene, views, rec)
     mesh = rec.surface.mesh.copy()
-    T, model_position, centre = model_placement(np.asarray(mesh.vertices),
-                                                rec.view_a.R_view_from_world, views)
-    prof = rec.profile
-    d_mm = np.interp(s, prof.s_mm, prof.diameter_smooth_mm)
-    # Against the local (tapering) reference: a healthy distal vessel stays green.
-    ref_all = np.asarray(prof.reference_diameter_mm, float)
-    ref_mm = np.interp(s, prof.s_mm, np.where(np.isfinite(ref_all), ref_all,
-                                              float(np.nanmax(ref_all))))
-    _, nearest = cKDTree(X).query(np.asarray(mesh.vertices))
-    colors = diameter_colors(d_mm[nearest], ref_mm[nearest])
+    T, _, centre = model_placement(np.asarray(mesh.vertices), rec.view_a.R_view_from_world,
+                                   views)
+    colors = segment_diameter_colors(rec, np.asarray(mesh.vertices))
     mesh.apply_transform(T)
     mesh.visual.vertex_colors = np.column_stack([colors, np.full(len(colors), 255, np.uint8)])
     root = scene.add_frame("/model", show_axes=False)
@@ -463,12 +456,7 @@ def draw_reconstruction(
     scene.add_line_segments("/model/centerline", polyline_segments(X_scene).astype(
         np.float32), (40, 40, 40), thickness=1.5, thickness_units="screen")
     m = rec.measurements
-    # Centred over the model (the notifications, top left, would cover a left-aligned
-    # title), a line above its box (the model's top end reaches the box's edge).
-    scene.add_label("/model/title", f"3D model, {m.segment_length_mm:.1f} mm; drag to rotate\n"
-                    "green = reference diameter, red = half of it",
-                    position=(model_position[0], model_position[1] - MODEL_SIZE / 2 - 0.04,
-                              0.0),
+    scene.add_label("/model/title", segment_title(rec), position=title_position(centre),
                     anchor="top-center")
     model = ModelNodes(root=root, position=centre, T_scene_from_world=T)
     draw_lesion_marks(scene, views, rec, model, automatic_marks(rec), m.mld_mm)

@@ -23,6 +23,12 @@ import numpy as np
 import viser
 from numpy.typing import NDArray
 
+from viewer_app.model_colours import (
+    FFR_KEY_TEXT,
+    ffr_colors,
+    segment_diameter_colors,
+    vertex_ffr,
+)
 from viewer_app.placing import name_place
 from viewer_app.scene import (
     MODEL_SIZE,
@@ -39,6 +45,8 @@ from viewer_app.scene import (
     model_placement,
     overlay_name,
     polyline_segments,
+    segment_title,
+    title_position,
 )
 
 if TYPE_CHECKING:
@@ -58,6 +66,9 @@ __all__ = [
     "draw_result",
     "draw_out_of_date",
     "draw_tree",
+    "ffr_title",
+    "has_ffr",
+    "paint_model",
     "highlight_branch",
     "is_tree",
     "marks_key",
@@ -67,6 +78,7 @@ __all__ = [
     "run_reconstruction",
     "seeds_for_run",
     "summary_text",
+    "tree_title",
 ]
 
 #: (name, RGB) of the branches' colours, in segment order (then again from the first):
@@ -185,18 +197,21 @@ def branch_heading(result: Result, shown: int) -> str:
 
 
 def draw_result(scene: viser.SceneApi, views: Mapping[str, View], result: Result,
-                current: str) -> tuple[ModelNodes, int]:
+                current: str, by_ffr: bool = False) -> tuple[ModelNodes, int]:
     """Draw a new result in place of the last (a tree branch by branch, else the one
     segment as scene.draw_reconstruction does), the branch of the segment called
-    ``current`` shown (the first branch if it was not reconstructed). Returns the model's
-    nodes and the index of the branch shown; the app fills the results panel."""
+    ``current`` shown (the first branch if it was not reconstructed), the model coloured
+    by FFR when ``by_ffr`` (:func:`paint_model`). Returns the model's nodes and the index
+    of the branch shown; the app fills the results panel."""
     clear_results(scene, views)
     names = branch_names(result)
     shown = names.index(current) if current in names else 0
     if is_tree(result):
-        model = draw_tree(scene, views, result, shown)
+        model = draw_tree(scene, views, result, shown, by_ffr)
     else:
         model = draw_reconstruction(scene, views, result)
+        if by_ffr:
+            paint_model(scene, result, model, shown, by_ffr)
     return model, shown
 
 
@@ -233,8 +248,14 @@ def _shade(rgb: tuple[int, int, int], fraction: float) -> tuple[int, int, int]:
     return tuple(int(round(c * fraction)) for c in rgb)
 
 
+def tree_title(tree: TreeReconstruction) -> str:
+    """The line over a tree's model coloured by branch."""
+    return (f"3D tree, {len(branches_of(tree))} branches, coloured as on the images; drag "
+            "to rotate\nthe chart is of the branch chosen under Branch")
+
+
 def draw_tree(scene: viser.SceneApi, views: Mapping[str, View], tree: TreeReconstruction,
-              shown: int) -> ModelNodes:
+              shown: int, by_ffr: bool = False) -> ModelNodes:
     """Every branch on both images and the tree in 3D (module docstring); branch ``shown``
     highlighted, its MLD and lesion ends marked. Returns the model's nodes."""
     draw_refusal(scene, views, None)
@@ -244,16 +265,11 @@ def draw_tree(scene: viser.SceneApi, views: Mapping[str, View], tree: TreeRecons
     draw_flagged(scene, views, tree)
     draw_catheters(scene, views, tree)
     parts = branches_of(tree)
-    T, model_position, centre = model_placement(np.asarray(tree.tree_surface.mesh.vertices),
-                                                parts[0].view_a.R_view_from_world, views)
-    root = scene.add_frame("/model", show_axes=False)
-    scene.add_label("/model/title", f"3D tree, {len(parts)} branches, coloured as on the "
-                    "images; drag to rotate\nthe chart is of the branch chosen under Branch",
-                    position=(model_position[0],
-                              model_position[1] - MODEL_SIZE / 2 - 0.04, 0.0),
-                    anchor="top-center")
+    T, _, centre = model_placement(np.asarray(tree.tree_surface.mesh.vertices),
+                                   parts[0].view_a.R_view_from_world, views)
+    root = scene.add_frame("/model", show_axes=False)  # the title: paint_model's
     model = ModelNodes(root=root, position=centre, T_scene_from_world=T)
-    highlight_branch(scene, views, tree, model, shown)
+    highlight_branch(scene, views, tree, model, shown, by_ffr)
     return model
 
 
@@ -281,19 +297,16 @@ def mesh_colors(tree: TreeReconstruction, shown: int) -> NDArray[np.uint8]:
 
 
 def highlight_branch(scene: viser.SceneApi, views: Mapping[str, View],
-                     tree: TreeReconstruction, model: ModelNodes, shown: int) -> None:
-    """The tree's mesh (mesh_colors: branch ``shown`` in full colour), each branch's lines
+                     tree: TreeReconstruction, model: ModelNodes, shown: int,
+                     by_ffr: bool = False) -> None:
+    """The tree's mesh (mesh_colors: branch ``shown`` in full colour; or each branch's FFR,
+    ``by_ffr``: :func:`paint_model`), each branch's lines
     on both images and in 3D with their names, branch ``shown``'s thicker and its MLD and
     lesion ends marked (scene.draw_lesion_marks)."""
     parts = branches_of(tree)
     names = branch_names(tree)
     T = model.T_scene_from_world
-    mesh = tree.tree_surface.mesh.copy()
-    mesh.apply_transform(T)
-    colors_rgb = mesh_colors(tree, shown)
-    mesh.visual.vertex_colors = np.column_stack([colors_rgb,
-                                                 np.full(len(colors_rgb), 255, np.uint8)])
-    scene.add_mesh_trimesh("/model/mesh", mesh, cast_shadow=False, receive_shadow=False)
+    paint_model(scene, tree, model, shown, by_ffr)
     for k, (part, name) in enumerate(zip(parts, names, strict=True)):
         rgb, thickness_px = branch_color(k), SHOWN_PX if k == shown else THICK_PX
         X_world = np.asarray(part.centerline_3d.X_world, dtype=float)
@@ -318,3 +331,61 @@ def highlight_branch(scene: viser.SceneApi, views: Mapping[str, View],
                         position=tuple(middle_scene + [0.025, 0.0, 0.0]), anchor="center-left")
     rec = parts[shown]
     draw_lesion_marks(scene, views, rec, model, automatic_marks(rec), rec.measurements.mld_mm)
+
+
+def has_ffr(result: Result) -> bool:
+    """Whether any branch of ``result`` (or the one segment) has its FFR."""
+    return any(getattr(b, "ffr", None) is not None for b in branches_of(result))
+
+
+@lru_cache(maxsize=1)
+def _vertex_ffr(result: Result) -> NDArray[np.float64]:
+    """The FFR (V,) at each vertex of the result's mesh (model_colours.vertex_ffr; the
+    last result's, kept: the model is recoloured at each switch)."""
+    mesh = result.tree_surface.mesh if is_tree(result) else result.surface.mesh
+    return vertex_ffr(branches_of(result), np.asarray(mesh.vertices))
+
+
+def ffr_title(result: Result) -> str:
+    """The line over a model coloured by FFR: what the colours are, and that the FFR is a
+    model estimate for research."""
+    what = (f"3D tree, {len(branches_of(result))} branches, each coloured by its FFR"
+            if is_tree(result) else
+            f"3D model, {result.measurements.segment_length_mm:.1f} mm, coloured by FFR")
+    return f"{what} (model estimate, research use); drag to rotate\n{FFR_KEY_TEXT}"
+
+
+def paint_model(scene: viser.SceneApi, result: Result, model: ModelNodes, shown: int,
+                by_ffr: bool) -> bool:
+    """Colour the model's mesh by FFR (``by_ffr``, when the result has one: each vertex
+    the FFR of its nearest centerline point, model_colours) with the distal FFR named at
+    each vessel's end, or as drawn first (a segment by diameter, a tree by branch with
+    branch ``shown`` in full colour); the title over the model says which. Returns
+    whether the model is coloured by FFR."""
+    by_ffr = by_ffr and has_ffr(result)
+    tree = is_tree(result)
+    mesh = (result.tree_surface.mesh if tree else result.surface.mesh).copy()
+    if by_ffr:
+        rgb, title = ffr_colors(_vertex_ffr(result)), ffr_title(result)
+    elif tree:
+        rgb, title = mesh_colors(result, shown), tree_title(result)
+    else:
+        rgb = segment_diameter_colors(result, np.asarray(mesh.vertices))
+        title = segment_title(result)
+    T = model.T_scene_from_world
+    mesh.apply_transform(T)
+    mesh.visual.vertex_colors = np.column_stack([rgb, np.full(len(rgb), 255, np.uint8)])
+    scene.add_mesh_trimesh("/model/mesh", mesh, cast_shadow=False, receive_shadow=False)
+    scene.add_label("/model/title", title, position=title_position(model.position),
+                    anchor="top-center")
+    scene.remove_by_name("/model/ffr_values")
+    for k, part in enumerate(branches_of(result) if by_ffr else ()):
+        if part.ffr is None:
+            continue
+        end = T[:3, :3] @ np.asarray(part.centerline_3d.X_world[-1], float) + T[:3, 3]
+        ci = part.ffr.ci95
+        text = f"distal FFR {part.ffr.distal:.2f}" + ("" if ci is None else
+                                                      f" (95 % {ci[0]:.2f}-{ci[1]:.2f})")
+        scene.add_label(f"/model/ffr_values/b{k}", text, anchor="center-left",
+                        position=tuple(end + np.array([0.03, 0.0, 0.0])))
+    return by_ffr

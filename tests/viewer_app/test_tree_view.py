@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import trimesh
+from scipy.spatial import cKDTree
 from vtkmodules.util.numpy_support import vtk_to_numpy
 from vtkmodules.vtkIOXML import vtkXMLPolyDataReader
 
@@ -24,7 +25,9 @@ from recon.io import load_seeds
 from recon.seeds import Seeds
 from recon.tree import TreeReconstruction
 from viewer_app import ViewerApp
-from viewer_app.plot import profile_plot
+from viewer_app.model_colours import ffr_colors, vertex_ffr
+from viewer_app.plot import ffr_plot, profile_plot
+from viewer_app.results import ffr_rows
 from viewer_app.scene import lesion_points
 from viewer_app.tree_view import SHOWN_PX, THICK_PX, branch_color
 
@@ -42,6 +45,13 @@ def tree_app(tmp_path: Path) -> Iterator[ViewerApp]:
         yield viewer
     finally:
         viewer.stop()
+
+
+def _mesh_rgb(app: ViewerApp) -> np.ndarray:
+    """The vertex colours (V, 3) of the model's mesh as the server sent it."""
+    (mesh,) = trimesh.load(io.BytesIO(_node(app, "/model/mesh").glb_data),
+                           file_type="glb").geometry.values()
+    return np.asarray(mesh.visual.vertex_colors)[:, :3]
 
 
 def _node(app: ViewerApp, name: str) -> object:
@@ -122,6 +132,27 @@ def test_a_tree_is_reconstructed_drawn_per_branch_and_its_results_follow_the_seg
         lesion = _node(app, "/over_a/lesion").points  # the MLD first (float16 in viser)
         np.testing.assert_allclose(lesion[0, :2], app.views["a"].local_from_px(mld_px)[0, :2],
                                    atol=5e-4)
+    # Coloured by FFR (issue 47): each branch by its own pullback, its distal value named;
+    # the branch shown's chart; back to the branch colours.
+    assert all(b.ffr is not None for b in rec.branches), rec.warnings
+    assert app.set_ffr_colouring(True)
+    V = np.asarray(rec.tree_surface.mesh.vertices)
+    rgb = _mesh_rgb(app)
+    assert np.array_equal(rgb, ffr_colors(vertex_ffr(rec.branches, V)))
+    X_all = np.vstack([b.centerline_3d.X_world for b in rec.branches])
+    _, nearest = cKDTree(X_all).query(V)
+    ends = np.cumsum([len(b.centerline_3d.X_world) for b in rec.branches]) - 1
+    for k, branch in enumerate(rec.branches):  # round each branch's distal end: its value
+        end = nearest == ends[k]
+        assert end.sum() > 10 and np.all(rgb[end] == ffr_colors([branch.ffr.distal])[0])
+        text = _node(app, f"/model/ffr_values/b{k}").text
+        assert text.startswith(f"distal FFR {branch.ffr.distal:.2f}")
+    app.set_segment(names[1])
+    assert np.array_equal(_mesh_rgb(app), rgb)  # a switch of branch keeps the FFR colours
+    assert np.array_equal(app.panels.results.ffr_plot.image, ffr_plot(rec.branches[1]))
+    assert ffr_rows(rec.branches[1])[0] in app.panels.results.clinical.content
+    assert not app.set_ffr_colouring(False)
+    assert {tuple(c) for c in _mesh_rgb(app)} & set(colours) == {branch_color(1)}
     app.set_segment(names[2])  # the lesion sliders move that branch's ends
     lesion = app.set_lesion(5.0, 20.0)
     s, d = rec.branches[2].profile.s_mm, rec.branches[2].profile.diameter_smooth_mm
