@@ -17,7 +17,7 @@ from recon.trace.centerline import (
     trace_segment,
 )
 
-DATA = Path(__file__).resolve().parents[1] / "data"
+DATA = Path(__file__).resolve().parents[2] / "data"
 
 
 # ------------------------------------------------------------------ helpers

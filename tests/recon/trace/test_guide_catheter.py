@@ -6,15 +6,15 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from tests.recon.trace.test_centerline import distance_to, render, segment
 
 import recon.trace.trace_path as trace_path
 from recon.trace.centerline import trace_segment
 from recon.trace.guide_catheter import Catheter2D, catheter_runs, find_catheters
 from recon.trace.trace_error import TraceError
 from recon.trace.vesselness import compute_vesselness
+from tests.recon.trace.test_centerline import distance_to, render, segment
 
-DATA = Path(__file__).resolve().parents[1] / "data"
+DATA = Path(__file__).resolve().parents[2] / "data"
 
 
 def _shortcut_case(step: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
