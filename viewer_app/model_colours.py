@@ -44,8 +44,8 @@ FloatArray = NDArray[np.float64]
 FFR_LOW_STOPS = ((0.50, (120, 0, 25)), (0.70, (205, 30, 30)), (FFR_CUTOFF, (250, 120, 40)))
 #: ... and above it: light blue just above 0.80 to deep blue at 1.00. The step from
 #: orange to light blue marks the cut-off on the model.
-FFR_HIGH_STOPS = ((FFR_CUTOFF, (135, 200, 240)), (0.90, (70, 140, 225)),
-                  (1.00, (35, 70, 185)))
+FFR_HIGH_STOPS = ((FFR_CUTOFF, (100, 180, 240)), (0.90, (55, 125, 220)),
+                  (1.00, (30, 60, 175)))  # (lighter under the page's lights: kept saturated)
 FFR_GREY = (170, 170, 170)  # no FFR there (not computed for that vessel)
 #: What the model's colours say (the title over the model, the key in the panel).
 FFR_KEY_TEXT = (f"red / orange = FFR {FFR_CUTOFF:.2f} or below, blue = above (key under "
@@ -124,14 +124,15 @@ def vertex_ffr(parts: Sequence[Reconstruction], vertices_world: FloatArray) -> F
 
 
 @lru_cache(maxsize=2)
-def ffr_key_image(width: int = 440, height: int = 124) -> NDArray[np.uint8]:
+def ffr_key_image(width: int = 360, height: int = 112) -> NDArray[np.uint8]:
     """The FFR colour key as an RGB image (H, W, 3): the scale from 0.50 to 1.00 with
-    ticks, the cut-off marked, and what the colours are (a model estimate for research)."""
+    ticks, the cut-off marked, and what the colours are (a model estimate for research).
+    Narrow, so that the page's panel shows its text large enough."""
     img = np.full((height, width, 3), 255, np.uint8)
     font, ink = cv2.FONT_HERSHEY_SIMPLEX, (40, 40, 40)
-    left, right, top, bar_h = 34, 34, 27, 18  # (under the scale: room for the page's button)
-    cv2.putText(img, "FFR colours on the model (model estimate, research use)", (4, 15),
-                font, 0.48, ink, 1, cv2.LINE_AA)
+    left, right, top, bar_h = 22, 22, 27, 18  # (under the text: room for the page's button)
+    cv2.putText(img, "FFR colours (model estimate, research use)", (4, 15), font, 0.48, ink,
+                1, cv2.LINE_AA)
     x = np.arange(left, width - right)
     values = 0.5 + (x - left) / (width - right - 1 - left) * 0.5
     img[top:top + bar_h, left:width - right] = ffr_colors(values)[None, :, :]
@@ -140,15 +141,15 @@ def ffr_key_image(width: int = 440, height: int = 124) -> NDArray[np.uint8]:
         tx = int(round(left + (tick - 0.5) / 0.5 * (width - right - 1 - left)))
         cut = abs(tick - FFR_CUTOFF) < 1e-9
         cv2.line(img, (tx, top + bar_h), (tx, top + bar_h + 5), ink, 2 if cut else 1)
-        label = f"{tick:.2f}"
+        label = f"{tick:.1f}" if not cut else f"{tick:.2f}"
         w = cv2.getTextSize(label, font, 0.48, 1)[0][0]
-        cv2.putText(img, label, (tx - w // 2, top + bar_h + 20), font, 0.48, ink,
+        cv2.putText(img, label, (tx - w // 2, top + bar_h + 21), font, 0.48, ink,
                     2 if cut else 1, cv2.LINE_AA)
         if cut:  # the cut-off through the bar
             cv2.line(img, (tx, top - 3), (tx, top + bar_h + 3), (0, 0, 0), 2)
-    cv2.putText(img, f"red / orange: {FFR_CUTOFF:.2f} or below (darkest: 0.50 or below)",
-                (4, height - 40), font, 0.46, ink, 1, cv2.LINE_AA)
-    cv2.putText(img, f"blue: above {FFR_CUTOFF:.2f}; grey: no FFR there", (4, height - 23),
-                font, 0.46, ink, 1, cv2.LINE_AA)
+    cv2.putText(img, f"red / orange: {FFR_CUTOFF:.2f} or below", (4, height - 26), font, 0.48,
+                ink, 1, cv2.LINE_AA)
+    cv2.putText(img, "blue: above; grey: no FFR there", (4, height - 8), font, 0.48, ink, 1,
+                cv2.LINE_AA)
     img.setflags(write=False)  # cached: one image for every caller
     return img

@@ -16,6 +16,9 @@ __all__ = [
     "MARK_LABEL_WIDTH",
     "NAME_CHAR",
     "NAME_PLACES",
+    "clear_place",
+    "end_places",
+    "hits",
     "label_box",
     "label_places",
     "name_place",
@@ -36,13 +39,14 @@ LABEL_PLACES = ((np.array([0.008, 0.008, 0.0]), "top-left"),
 MARK_LABEL_WIDTH, LABEL_HEIGHT = 0.045, 0.03
 
 
-def label_box(at: FloatArray, anchor: str, width: float) -> FloatArray:
-    """The box (x0, x1, y0, y1) of a label of ``width`` placed at ``at`` (2,) by its
-    ``anchor`` (viser's "top-left", ..., "center-right"; y grows downwards)."""
+def label_box(at: FloatArray, anchor: str, width: float,
+              height: float = LABEL_HEIGHT) -> FloatArray:
+    """The box (x0, x1, y0, y1) of a label ``width`` x ``height`` placed at ``at`` (2,) by
+    its ``anchor`` (viser's "top-left", ..., "center-right"; y grows downwards)."""
     vertical, horizontal = anchor.split("-")
-    x0 = at[0] - (width if horizontal == "right" else 0.0)
-    y0 = at[1] - {"top": 0.0, "center": LABEL_HEIGHT / 2, "bottom": LABEL_HEIGHT}[vertical]
-    return np.array([x0, x0 + width, y0, y0 + LABEL_HEIGHT])
+    x0 = at[0] - {"left": 0.0, "center": width / 2, "right": width}[horizontal]
+    y0 = at[1] - {"top": 0.0, "center": height / 2, "bottom": height}[vertical]
+    return np.array([x0, x0 + width, y0, y0 + height])
 
 
 def label_places(pts: FloatArray) -> list[tuple[FloatArray, str]]:
@@ -89,16 +93,42 @@ def name_place(end_xy: NDArray[np.float64], name: str, marks_xyz: NDArray,
              for x, y in marks[:, :2]]
     boxes += [label_box(p[:2] + offset[:2], anchor, MARK_LABEL_WIDTH)
               for p, (offset, anchor) in zip(marks, label_places(marks), strict=True)]
-    taken = np.array(boxes).reshape(-1, 4)
-    hits = []
+    return clear_place(end_xy, NAME_CHAR * len(name), np.array(boxes), places)
+
+
+def hits(box: FloatArray, taken: NDArray) -> int:
+    """How many of the boxes ``taken`` (K, 4) the box (x0, x1, y0, y1) meets."""
+    taken = np.asarray(taken, dtype=float).reshape(-1, 4)
+    return int(np.count_nonzero((taken[:, 1] > box[0]) & (taken[:, 0] < box[1])
+                                & (taken[:, 3] > box[2]) & (taken[:, 2] < box[3])))
+
+
+def clear_place(at_xy: NDArray[np.float64], width: float, taken: NDArray,
+                places: tuple) -> tuple[NDArray[np.float64], str]:
+    """The first of ``places`` ((offset (2,), anchor)) where a label ``width`` wide beside
+    ``at_xy`` (2,) meets none of the boxes ``taken`` (K, 4) (x0, x1, y0, y1), else the one
+    that meets fewest. Returns (offset (2,), anchor)."""
+    met = []
     for offset, anchor in places:
-        x0, x1, y0, y1 = label_box(end_xy + offset, anchor, NAME_CHAR * len(name))
-        hits.append(int(np.count_nonzero((taken[:, 1] > x0) & (taken[:, 0] < x1)
-                                         & (taken[:, 3] > y0) & (taken[:, 2] < y1))))
-        if hits[-1] == 0:
+        met.append(hits(label_box(np.asarray(at_xy, float) + offset, anchor, width), taken))
+        if met[-1] == 0:
             break
-    offset, anchor = places[int(np.argmin(hits))]
+    offset, anchor = places[int(np.argmin(met))]
     return np.asarray(offset, dtype=float), anchor
+
+
+def end_places(tangent_xy: NDArray[np.float64], gap: float = 0.03) -> tuple:
+    """Where a label may go beside a vessel's distal end on the model (offset (2,),
+    anchor), first beyond the end along its direction ``tangent_xy`` (2,) (the text
+    running away from the vessel), then round it, twice as far out at the last."""
+    d = np.asarray(tangent_xy, dtype=float)
+    d = d / np.linalg.norm(d) if np.linalg.norm(d) > 1e-12 else np.array([1.0, 0.0])
+    if abs(d[1]) > 2.0 * abs(d[0]):  # up or down the screen: the text centred on it
+        first = (gap * d, "bottom-center" if d[1] < 0 else "top-center")
+    else:
+        first = (gap * d, "center-left" if d[0] >= 0 else "center-right")
+    round_it = tuple((offset * 3.0, anchor) for offset, anchor in NAME_PLACES)
+    return (first, *round_it, *((offset * 2.0, anchor) for offset, anchor in round_it))
 
 
 #: Where the MLD's name may go: beside it, then a little further out when marks crowd it.

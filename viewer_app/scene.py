@@ -577,6 +577,7 @@ class Framing:
     half_w: float  # half width and height of the content to fit
     half_h: float
     straight: bool  # camera straight at the images (else: keep the user's direction)
+    near: float = 0.0  # how far the content reaches from the centre towards the camera
 
 
 def layout_framing(layout: str, views: Mapping[str, View],
@@ -594,9 +595,10 @@ def layout_framing(layout: str, views: Mapping[str, View],
     if model_position is None or layout == "Angiograms":
         return Framing(True, False, images_centre, half_w,
                        half_h + 0.04, True)
-    if layout == "3D model":
-        return Framing(False, True, np.asarray(model_position, float), MODEL_SIZE * 0.75,
-                       MODEL_SIZE * 0.75, False)
+    if layout == "3D model":  # the model's nearest point lies on the images' plane (z 0)
+        centre = np.asarray(model_position, float)
+        return Framing(False, True, centre, MODEL_SIZE * 0.75, MODEL_SIZE * 0.75, False,
+                       near=max(float(centre[2]), 0.0))
     top = float(model_position[1]) - MODEL_SIZE / 2
     centre = np.array([images_centre[0], (top + half_h) / 2, 0.0])
     return Framing(True, True, centre, half_w, (half_h - top) / 2 + 0.04, True)
@@ -605,8 +607,8 @@ def layout_framing(layout: str, views: Mapping[str, View],
 def camera_distance(fr: Framing, aspect: float, fov_rad: float = CAMERA_FOV_RAD) -> float:
     """Distance at which a camera of vertical field of view ``fov_rad`` and the given
     aspect (width / height) shows the framing's content whole."""
-    t = float(np.tan(fov_rad / 2))
-    return 1.06 * max(fr.half_h / t, fr.half_w / (t * max(aspect, 0.2)))
+    t = float(np.tan(fov_rad / 2))  # (the content's near side, not its centre, must fit)
+    return 1.06 * max(fr.half_h / t, fr.half_w / (t * max(aspect, 0.2))) + fr.near
 
 
 def apply_framing(client: viser.ClientHandle, fr: Framing) -> None:

@@ -29,6 +29,7 @@ from viewer_app.model_colours import (
     segment_diameter_colors,
     vertex_ffr,
 )
+from viewer_app.model_labels import distal_label_places
 from viewer_app.placing import name_place
 from viewer_app.scene import (
     MODEL_SIZE,
@@ -65,6 +66,7 @@ __all__ = [
     "branches_of",
     "draw_result",
     "draw_out_of_date",
+    "distal_ffr_text",
     "draw_tree",
     "ffr_title",
     "has_ffr",
@@ -355,6 +357,13 @@ def ffr_title(result: Result) -> str:
     return f"{what} (model estimate, research use); drag to rotate\n{FFR_KEY_TEXT}"
 
 
+def distal_ffr_text(ffr: object) -> str:
+    """The label at a vessel's distal end on the model coloured by FFR (an FFRResult)."""
+    ci = ffr.ci95
+    return f"distal FFR {ffr.distal:.2f}" + ("" if ci is None else
+                                             f" (95 % {ci[0]:.2f}-{ci[1]:.2f})")
+
+
 def paint_model(scene: viser.SceneApi, result: Result, model: ModelNodes, shown: int,
                 by_ffr: bool) -> bool:
     """Colour the model's mesh by FFR (``by_ffr``, when the result has one: each vertex
@@ -379,13 +388,13 @@ def paint_model(scene: viser.SceneApi, result: Result, model: ModelNodes, shown:
     scene.add_label("/model/title", title, position=title_position(model.position),
                     anchor="top-center")
     scene.remove_by_name("/model/ffr_values")
-    for k, part in enumerate(branches_of(result) if by_ffr else ()):
-        if part.ffr is None:
-            continue
-        end = T[:3, :3] @ np.asarray(part.centerline_3d.X_world[-1], float) + T[:3, 3]
-        ci = part.ffr.ci95
-        text = f"distal FFR {part.ffr.distal:.2f}" + ("" if ci is None else
-                                                      f" (95 % {ci[0]:.2f}-{ci[1]:.2f})")
-        scene.add_label(f"/model/ffr_values/b{k}", text, anchor="center-left",
-                        position=tuple(end + np.array([0.03, 0.0, 0.0])))
+    parts = branches_of(result)
+    texts = [distal_ffr_text(p.ffr) if by_ffr and p.ffr is not None else None for p in parts]
+    if any(texts):  # clear of the vessels and the labels on the model, in both views
+        places = distal_label_places(parts, T, model.position, shown, texts,
+                                     branch_names(result) if tree else None)
+        for k, (text, place) in enumerate(zip(texts, places, strict=True)):
+            if text is not None and place is not None:
+                scene.add_label(f"/model/ffr_values/b{k}", text, position=place[0],
+                                anchor=place[1])
     return by_ffr

@@ -486,6 +486,14 @@ def test_a_branch_added_from_a_landmark_and_the_tree_shown_branch_by_branch(
             wait_for(lambda: app.layout == "3D model", 10, "the 3D model")
             b.page.wait_for_timeout(1000)
             b.shot("tree_5_model.png")
+            ffr_box = b.page.get_by_text("Colour the model by FFR").first  # issue 47
+            ffr_box.click()
+            wait_for(lambda: app.ffr_colouring and app.panels.results.ffr_key.visible, 10,
+                     "the tree coloured by FFR")
+            b.page.wait_for_timeout(1000)
+            b.shot("tree_5b_model_by_ffr.png")
+            ffr_box.click()
+            wait_for(lambda: not app.ffr_colouring, 10, "the tree coloured by branch")
             # Renamed after Reconstruct: the results shown take the name, no new run.
             b.choose("Show", "Angiograms + 3D")
             field = b.text_field("Segment name")

@@ -14,7 +14,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 import trimesh
-from browser_page import CHROMIUM, Browser, failed, screen_box, wait_for
+from browser_page import (
+    CANVAS_JS,
+    CHROMIUM,
+    PROJECT_JS,
+    Browser,
+    failed,
+    screen_box,
+    wait_for,
+)
 
 from recon.lumen.ffr import RESEARCH_NOTE
 from viewer_app import ViewerApp
@@ -42,6 +50,31 @@ def _visible_text(b: Browser, text: str) -> None:
     found = b.page.get_by_text(text).first
     found.scroll_into_view_if_needed()
     found.wait_for(state="visible", timeout=10_000)
+
+
+#: A label's size on the screen at viser's default font (CSS px), measured on the
+#: screenshots: about 5.6 px per character, 12 px high.
+LABEL_CHAR_PX, LABEL_HEIGHT_PX = 5.6, 12.0
+
+
+def _label_box(b: Browser, app: ViewerApp, name: str) -> tuple[float, ...]:
+    """The screen box (x0, x1, y0, y1) of the model's label ``name``: its position through
+    the page's own camera, its size from its text and anchor."""
+    handle = app.server.scene.get_handle_by_name(name)
+    x, y = b.page.evaluate(PROJECT_JS, ["/model", *map(float, handle.position)])
+    w = LABEL_CHAR_PX * len(handle.text.splitlines()[0])
+    vertical, horizontal = handle.anchor.split("-")
+    x0 = x - {"left": 0.0, "center": w / 2, "right": w}[horizontal]
+    y0 = y - {"top": 0.0, "center": LABEL_HEIGHT_PX / 2, "bottom": LABEL_HEIGHT_PX}[vertical]
+    return x0, x0 + w, y0, y0 + LABEL_HEIGHT_PX
+
+
+def _apart(b: Browser, app: ViewerApp, *names: str) -> None:
+    """The model's labels ``names`` do not print over each other on the screen."""
+    boxes = [_label_box(b, app, n) for n in names]
+    for i, p in enumerate(boxes):
+        for q in boxes[i + 1:]:
+            assert p[1] <= q[0] or q[1] <= p[0] or p[3] <= q[2] or q[3] <= p[2], (names, boxes)
 
 
 def test_the_ffr_on_the_page_chart_table_and_the_model_coloured(
@@ -105,15 +138,19 @@ def test_the_ffr_on_the_page_chart_table_and_the_model_coloured(
             title = app.server.scene.get_handle_by_name("/model/title").text
             assert "coloured by FFR" in title and "research use" in title
             b.page.wait_for_timeout(1500)
+            _apart(b, app, "/model/ffr_values/b0", "/model/mld_label")
             b.shot("ffr_2_model_coloured.png")
             b.page.get_by_text(CHECKBOX).first.scroll_into_view_if_needed()
-            assert b.page.evaluate(SHOWN_IMAGES_JS, [440, 124]) == 1  # the colour key
+            assert b.page.evaluate(SHOWN_IMAGES_JS, [360, 112]) == 1  # the colour key
             b.shot("ffr_3_key.png")
             b.choose("Show", "3D model")
             wait_for(lambda: app.layout == "3D model", 10, "the 3D model")
             b.page.wait_for_timeout(1200)
-            model = screen_box(b, "/model/mesh")
-            assert model[2] > model[0] and model[3] > model[1]
+            model = screen_box(b, "/model/mesh")  # whole: its near end was cut off
+            canvas = b.page.evaluate(CANVAS_JS)
+            assert model[0] >= 0 and model[1] >= 0 and model[2] <= canvas[0] \
+                and model[3] <= canvas[1], (model, canvas)
+            _apart(b, app, "/model/ffr_values/b0", "/model/mld_label")
             b.shot("ffr_4_model_alone.png")
             b.choose("Show", "Angiograms + 3D")
             wait_for(lambda: app.layout == "Angiograms + 3D", 10, "the layout")

@@ -37,8 +37,8 @@ def test_the_colours_change_at_the_cut_off() -> None:
     assert np.all(rgb[0] < rgb[1]) and np.all(high[2] <= high[0])  # darker further out
     assert tuple(rgb[-1]) == FFR_GREY
     key = ffr_key_image()
-    assert key.shape == (124, 440, 3) and not key.flags.writeable
-    bar = key[36, 36:404].astype(int)  # the scale, 0.50 to 1.00 left to right
+    assert key.shape == (112, 360, 3) and not key.flags.writeable
+    bar = key[36, 24:336].astype(int)  # the scale, 0.50 to 1.00 left to right
     assert bar[0, 0] > bar[0, 2] and bar[-1, 2] > bar[-1, 0]
 
 
