@@ -37,8 +37,9 @@ from viewer_app.camera import PageCameras
 from viewer_app.catheter import CatheterTool
 from viewer_app.editing import MarkEditing
 from viewer_app.exports import EXPORT_KINDS
+from viewer_app.guide import LARGE_HEADER_ERROR_PX
 from viewer_app.panels import Panels, build_panels
-from viewer_app.patients import PatientPrompt
+from viewer_app.patients import PATIENTS_WAITING_TEXT, PatientPrompt
 from viewer_app.results import close_views_warning
 from viewer_app.runs import RunCommands
 from viewer_app.scene import LAYOUTS, ModelNodes, View
@@ -267,7 +268,8 @@ class ViewerApp(MarkEditing, RunCommands):
                   seeds: Seeds | None, seeds_path: str | None) -> None:
         with self._lock:
             self.views = {"a": View("a", angio_a, name_a), "b": View("b", angio_b, name_b)}
-            self.state = MarkState(angio_a.geometry, angio_b.geometry, snapper=self._snap)
+            self.state = MarkState(angio_a.geometry, angio_b.geometry, snapper=self._snap,
+                                   header_check_px=LARGE_HEADER_ERROR_PX)
             self.reconstruction, self.run_angios = None, None
             self.calibration, self.calibration_seeds = None, None
             self.model = None
@@ -320,6 +322,7 @@ class ViewerApp(MarkEditing, RunCommands):
                 return
             self.patients_confirmed = True
             self._show_patients()
+            self._redraw_marks()  # the guide line no longer waits for it
         log.info("two patients' files confirmed as one patient's views by the user")
         self.notify("One patient", "confirmed: files A and B are taken as one patient's "
                     "views", "info", client)
@@ -582,7 +585,9 @@ class ViewerApp(MarkEditing, RunCommands):
         """Marks, labels, selection and epipolar line in the scene; the marks panel;
         results of earlier marks said to be out of date."""
         scene.draw_marks(self.server.scene, self.views, self.state)
-        self.panels.show_marks(self.state, self.last_click_ms, self.autosave.path)
+        waiting = self.patients_differ and not self.patients_confirmed
+        self.panels.show_marks(self.state, self.last_click_ms, self.autosave.path,
+                               PATIENTS_WAITING_TEXT if waiting else None)
         self._show_staleness()
 
     # ================================================================ seeds

@@ -154,10 +154,12 @@ class Panels:
         self.marks.patients.content = f"⚠ {PATIENTS_DIFFER_TEXT}" if waiting else ""
         self.marks.patients.visible = self.marks.confirm_patients.visible = waiting
 
-    def show_marks(self, st: MarkState, last_click_ms: float, autosave_path: str | Path) -> None:
-        """The segment and selection lists, and the marks summary."""
+    def show_marks(self, st: MarkState, last_click_ms: float, autosave_path: str | Path,
+                   blocked: str | None = None) -> None:
+        """The guide line (``blocked``: why Reconstruct would be refused now, said in it),
+        the segment and selection lists, and the marks summary."""
         panel = self.marks
-        panel.guide.content = st.guide_text()
+        panel.guide.content = st.guide_text(blocked)
         with self.refreshing.during():
             if panel.mode.value != MODE_LABELS[st.mode]:
                 panel.mode.value = MODE_LABELS[st.mode]

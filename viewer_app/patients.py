@@ -15,7 +15,7 @@ from collections.abc import Callable
 
 import viser
 
-__all__ = ["PATIENTS_DIFFER_TEXT", "PatientPrompt"]
+__all__ = ["CONFIRM_LABEL", "PATIENTS_DIFFER_TEXT", "PATIENTS_WAITING_TEXT", "PatientPrompt"]
 
 log = logging.getLogger(__name__)
 
@@ -25,6 +25,9 @@ PATIENTS_DIFFER_TEXT = (
     "Open other files, or confirm that both are this patient's views (an anonymised copy, "
     "say); until then Calibrate and Reconstruct are refused.")
 CONFIRM_LABEL = "They are one patient's views"
+#: What the guide line says instead of "press Reconstruct" until then.
+PATIENTS_WAITING_TEXT = (f"files A and B name different patients: press **{CONFIRM_LABEL}** "
+                         "above if they are, or open two views of one patient")
 
 
 class PatientPrompt:

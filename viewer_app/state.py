@@ -36,8 +36,8 @@ from numpy.typing import NDArray
 
 from recon.geometry import ViewGeometry, epipolar_lines
 from recon.seeds import MAX_NAME_CHARS, Feature, Seeds, Segment, seeds_from_dict
+from viewer_app.guide import GuidedOrder
 from viewer_app.marks import (
-    KIND_WORDS,
     MODE_LABELS,
     MODES,
     ONE_SHOT_MODES,
@@ -63,23 +63,23 @@ FloatArray = NDArray[np.float64]
 #: A landmark clicked this close (px) to one already placed in that view is the same
 #: landmark placed again (not a second pair at the same place).
 SAME_LANDMARK_PX = 4.0
-#: A landmark paired at least this far (px) from its partner's epipolar line, and at
-#: most half as far from that of another landmark still waiting, is doubted.
-PAIRING_DOUBT_PX = 12.0
 
 # A snapper takes (view, raw click (2,)) and returns (placed point (2,), snap distance in
 # px or None when the click was kept raw, a one-line message for the user or None).
 Snapper = Callable[[str, FloatArray], tuple[FloatArray, float | None, str | None]]
 
 
-class MarkState:
-    """Marks of one image pair, with undo, modes, selection and epipolar lines.
+class MarkState(GuidedOrder):
+    """Marks of one image pair, with undo, modes, selection and epipolar lines (the guided
+    order and the guide line: :class:`viewer_app.guide.GuidedOrder`).
 
     Parameters
     ----------
     view_a, view_b : nominal geometries of the two views (view B may later be
         replaced by its calibrated geometry with :meth:`set_calibrated_b`).
     snapper : optional function snapping a click to the vessel (see ``Snapper``).
+    header_check_px : before Calibrate, a correspondence this far (px) from its magenta
+        line asks for a landmark pair first (viewer_app.guide); None: never.
     """
 
     def __init__(
@@ -87,7 +87,9 @@ class MarkState:
         view_a: ViewGeometry,
         view_b: ViewGeometry,
         snapper: Snapper | None = None,
+        header_check_px: float | None = None,
     ) -> None:
+        self.header_check_px = header_check_px
         self.view_a = view_a
         self.view_b_nominal = view_b
         self.view_b_calibrated: ViewGeometry | None = None
@@ -305,65 +307,6 @@ class MarkState:
         self._guide_id = self._guide_after(mark) if self.mode == "guided" else None
         return mark
 
-    # ------------------------------------------------------------ guided workflow
-    def _has(self, kind: str, view: str, group: int) -> bool:
-        return any(m.kind == kind and m.view == view and m.group == group for m in self.marks)
-
-    def guided_kind(self, view: str) -> str:
-        """What a guided click in ``view`` places: the current segment's proximal end,
-        then its distal end, then a landmark."""
-        for end in ("proximal", "distal"):
-            if not self._has(end, check_view(view), self.current_segment):
-                return end
-        return "feature"
-
-    def _guide_after(self, mark: Mark) -> int | None:
-        """The mark whose epipolar line shows where the next click in the other view
-        belongs: the partner-to-be of what that click will place."""
-        other = other_view(mark.view)
-        kind = self.guided_kind(other)
-        if kind == "feature":
-            group = self._feature_group_for(other)
-            cand = [m for m in self.marks if m.kind == "feature" and m.group == group
-                    and m.view == mark.view]
-        else:
-            cand = [m for m in self.marks if m.kind == kind and m.group == self.current_segment
-                    and m.view == mark.view]
-        return cand[-1].id if cand else mark.id
-
-    def next_clicks(self) -> dict[str, str]:
-        """What the next click in each view places, in words ({"a": "distal end", ...})."""
-        if self.mode == "guided":
-            return {v: KIND_WORDS[self.guided_kind(v)] for v in VIEWS}
-        return {v: KIND_WORDS[self.mode] for v in VIEWS}
-
-    def guide_text(self) -> str:
-        """One line for the page: what to click next in A and in B, and whether the
-        current segment is ready to reconstruct."""
-        nxt = self.next_clicks()
-        ends_done = all(self._has(e, v, self.current_segment)
-                        for e in ("proximal", "distal") for v in VIEWS)
-        text = f"Next click in **A**: {nxt['a']} · in **B**: {nxt['b']}."
-        guide = self.mark_by_id(self._guide_id)
-        if guide is not None and self.partner(guide) is None:
-            text += (f" The magenta line in {other_view(guide.view).upper()} shows where "
-                     f"{self.label(guide)} lies there.")
-        for view in VIEWS:
-            waiting = [f"F{g + 1}" for g in self.waiting_landmarks(view)]
-            if len(waiting) == 1:
-                text += (f" Landmark {waiting[0]} waits for its partner in "
-                         f"{other_view(view).upper()} (on the magenta line).")
-            elif waiting:
-                text += (f" Landmarks {', '.join(waiting)} wait for their partners in "
-                         f"{other_view(view).upper()}, in that order: the next landmark "
-                         f"clicked there pairs with {waiting[0]} (on the magenta line).")
-        if ends_done:
-            n = len(self.to_seeds().features)
-            text += (f" ✔ Segment ready: press **Reconstruct**. {n} landmark pair(s): "
-                     "branch points seen in both views make the calibration firmer "
-                     f"({2 + n} of 5 correspondences).")
-        return text
-
     def _feature_group_for(self, view: str, point_px: FloatArray | None = None) -> int:
         """Feature index a click in ``view`` (at ``point_px``, when known) goes to: the
         landmark already placed in ``view`` within :data:`SAME_LANDMARK_PX` of the click
@@ -383,38 +326,6 @@ class MarkState:
             if groups[g] == {other_view(view)}:
                 return g
         return max(groups) + 1 if groups else 0
-
-    def waiting_landmarks(self, view: str) -> list[int]:
-        """The landmark groups placed in ``view`` only, oldest first: the next landmark
-        clicked in the other view pairs with the first."""
-        return sorted({m.group for m in self.marks if m.kind == "feature" and m.view == view
-                       and self.partner(m) is None})
-
-    def pairing_doubt(self, mark: Mark) -> str | None:
-        """When ``mark``, a landmark that has just been paired, lies much nearer the
-        magenta (epipolar) line of another landmark still waiting than that of its
-        partner: one line saying so (the clicks may be out of order), else None."""
-        partner = self.partner(mark) if mark.kind == "feature" else None
-        if partner is None:
-            return None
-        others = [self.marks_by_group(g, partner.view) for g in
-                  self.waiting_landmarks(partner.view)]
-        if not others:
-            return None
-        src, dst = self.geometry(partner.view), self.geometry(mark.view)
-        lines = epipolar_lines(np.asarray([partner.point_px] + [o.point_px for o in others]),
-                               src, dst)
-        p = np.array([*mark.point_px, 1.0])
-        dist = np.abs(lines @ p) / np.hypot(lines[:, 0], lines[:, 1])
-        k = int(np.argmin(dist[1:])) + 1
-        if dist[0] < PAIRING_DOUBT_PX or dist[k] > 0.5 * dist[0]:
-            return None
-        near = self.label(others[k - 1])
-        return (f"{self.label(mark)} in {mark.view.upper()} was paired with "
-                f"{self.label(partner)} in {partner.view.upper()} (landmarks pair in click "
-                f"order) but lies {dist[0]:.0f} px off its magenta line and {dist[k]:.0f} px "
-                f"off {near}'s: if it is {near}'s partner, press Undo and click "
-                f"{self.label(partner)}'s partner first, or drag the marks where they belong")
 
     def marks_by_group(self, group: int, view: str, kind: str = "feature") -> Mark:
         """The mark of ``kind`` (a landmark by default) of ``group`` in ``view``."""
