@@ -21,6 +21,7 @@ from viewer_app.scene import (
     automatic_marks,
     camera_distance,
     lesion_points,
+    title_position,
 )
 
 if TYPE_CHECKING:
@@ -62,16 +63,18 @@ def _views(centre: FloatArray) -> list[tuple[Projection, float]]:
     return [(far, 1.0), (close, to_plane * t / (page_half_h))]
 
 
-def _label(view: tuple[Projection, float], at: FloatArray, anchor: str,
-           chars: int) -> FloatArray:
-    """The box of a label of ``chars`` characters at the scene point ``at`` (3,)."""
+def _label(view: tuple[Projection, float], at: FloatArray, anchor: str, chars: int,
+           lines: int = 1) -> FloatArray:
+    """The box of a label of ``lines`` lines of ``chars`` characters at the scene point
+    ``at`` (3,)."""
     project, size = view
-    return label_box(project(at)[0], anchor, MODEL_CHAR * chars * size, LABEL_HEIGHT * size)
+    return label_box(project(at)[0], anchor, MODEL_CHAR * chars * size,
+                     LABEL_HEIGHT * lines * size)
 
 
 def distal_label_places(parts: Sequence[Reconstruction], T: FloatArray, centre: FloatArray,
                         shown: int, texts: Sequence[str | None],
-                        names: Sequence[str] | None = None
+                        names: Sequence[str] | None = None, title: str = ""
                         ) -> list[tuple[tuple[float, float, float], str] | None]:
     """Where the label ``texts[k]`` (None: no label) goes at the distal end of part ``k``
     (a tree's branches or the one segment; T: world mm -> scene, ``centre``: the model's,
@@ -79,8 +82,8 @@ def distal_label_places(parts: Sequence[Reconstruction], T: FloatArray, centre: 
     end along the vessel, then round it) that in both straight views covers no vessel
     (each centerline widened by its radius), none of the labels already on the model
     (the MLD's and other lesions' of part ``shown``, the branches' ``names`` at their
-    middles) and no label placed before it; else the one covering fewest. Returns per
-    part (scene position (3,), anchor) or None."""
+    middles, the ``title`` over the model) and no label placed before it; else the one
+    covering fewest. Returns per part (scene position (3,), anchor) or None."""
     views = _views(centre)
     scale = float(np.linalg.norm(T[:3, 0]))
     X_parts = [np.asarray(p.centerline_3d.X_world, float) @ T[:3, :3].T + T[:3, 3]
@@ -92,6 +95,10 @@ def distal_label_places(parts: Sequence[Reconstruction], T: FloatArray, centre: 
             r = (np.asarray(part.centerline_3d.radius_mm, float)[::3] * scale + 0.005) * view[1]
             taken[j] += [np.array([x - q, x + q, y - q, y + q])
                          for (x, y), q in zip(xy, r, strict=True)]
+        if title:  # as scene.title_position puts it
+            rows = title.splitlines()
+            taken[j].append(_label(view, np.array(title_position(centre)), "top-center",
+                                   max(len(r) for r in rows), len(rows)))
         for k, name in enumerate(names or ()):  # at the middle, as highlight_branch puts it
             at = X_parts[k][len(X_parts[k]) // 2] + [0.025, 0.0, 0.0]
             taken[j].append(_label(view, at, "center-left", len(name)))

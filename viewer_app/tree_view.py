@@ -392,7 +392,7 @@ def paint_model(scene: viser.SceneApi, result: Result, model: ModelNodes, shown:
     texts = [distal_ffr_text(p.ffr) if by_ffr and p.ffr is not None else None for p in parts]
     if any(texts):  # clear of the vessels and the labels on the model, in both views
         places = distal_label_places(parts, T, model.position, shown, texts,
-                                     branch_names(result) if tree else None)
+                                     branch_names(result) if tree else None, title)
         for k, (text, place) in enumerate(zip(texts, places, strict=True)):
             if text is not None and place is not None:
                 scene.add_label(f"/model/ffr_values/b{k}", text, position=place[0],
