@@ -104,14 +104,16 @@ class MarkEditing:
             drag = self._drag
             if drag is None:
                 return None
-            if final:
-                self._drag = None
-            mark = self.state.move_mark(drag.mark_id, col, row, snap=final,
-                                        undoable=not drag.moved)
-            drag.moved = True
-            self._redraw_marks()
-            if final:
-                self._autosave()
+            try:
+                mark = self.state.move_mark(drag.mark_id, col, row, snap=final,
+                                            undoable=not drag.moved)
+                drag.moved = True
+                self._redraw_marks()
+                if final:
+                    self._autosave()
+            finally:
+                if final:  # the drag ends once its mark is snapped and saved (or refused)
+                    self._drag = None
             return mark
 
     def move_mark(self, mark_id: int, col: float, row: float,
