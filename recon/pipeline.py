@@ -470,7 +470,7 @@ def reconstruct_pair(
             tol_px, CORRIDOR_MIN_PX):
         # the pose on the traces moved the path's image in B out of the corridor: again
         t3 = trace_in_3d((angio_a, angio_b), (seg.a, seg.b), vesselness, view_a, cal.view_b,
-                         intensity, tol_px)
+                         intensity, tol_px, t3.evidence)
         (cl_a, cl_b), path3d = t3.traced, t3.path
         feat_a, feat_b = _features(seeds, options.segment, cl_a, cl_b)
         cal = calibrate_view_b(view_a, view_b_header, feat_a, feat_b, options,

@@ -59,7 +59,7 @@ from recon.pipeline import (
 from recon.pose import CalibrationResult, measurement_intervals, optimal_view, refine_with_matches
 from recon.seeds import Seeds, Segment
 from recon.trace import TraceError, VesselnessMap, compute_vesselness, trace_pair
-from recon.trace3d import trace_in_3d
+from recon.trace3d import evidence_pair, trace_in_3d
 from recon.types import Angiogram, Centerline2D, arclength
 
 __all__ = [
@@ -220,7 +220,7 @@ def reconstruct_tree(
     pose = None
     if options.tracer == "3d" and not one:
         pre = _pose_from_clicks(seeds, replace(options, segment=0), vesselness, view_a, view_b)
-        pose = (pre.view_b, _pose_tolerance_px(pre))
+        pose = (pre.view_b, _pose_tolerance_px(pre), evidence_pair((angio_a, angio_b), vesselness))
     traced = [None] if one and options.tracer == "3d" else [
         _trace_both(angio_a, angio_b, seg, vesselness, options, len(seeds.segments), pose)
         for seg in seeds.segments]
@@ -491,15 +491,17 @@ def _origin_from_the_clear_view(pair: tuple[Centerline2D, Centerline2D],
 
 def _trace_both(angio_a: Angiogram, angio_b: Angiogram, seg: Segment,
                 vesselness: tuple[VesselnessMap, VesselnessMap], options: ReconstructionOptions,
-                n_segments: int, pose: tuple[ViewGeometry, float] | None = None,
+                n_segments: int, pose: tuple[ViewGeometry, float, tuple] | None = None,
                 ) -> tuple[Centerline2D, Centerline2D]:
     """One segment's traces in A and B; in a tree, a failure names the segment. ``pose``:
-    B's pose from the clicks and its tolerance (px), for the 3D tracer (None: 2D)."""
+    B's pose from the clicks, its tolerance (px) and the views' evidence (computed once for
+    the tree), for the 3D tracer (None: 2D)."""
     view_a, view_b = angio_a.geometry, angio_b.geometry
     try:
         if pose is not None:
             return trace_in_3d((angio_a, angio_b), (seg.a, seg.b), vesselness, view_a, pose[0],
-                               (options.intensity_a, options.intensity_b), pose[1]).traced
+                               (options.intensity_a, options.intensity_b), pose[1],
+                               pose[2]).traced
         return trace_pair((angio_a, angio_b), (seg.a, seg.b), vesselness,
                            (view_a.pixel_mm_at_isocenter, view_b.pixel_mm_at_isocenter),
                            (options.intensity_a, options.intensity_b))

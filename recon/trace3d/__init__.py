@@ -19,6 +19,7 @@ _EXPORTS = {
     "CORRIDOR_MIN_PX": "recon.trace3d.corridor",
     "Traced3D": "recon.trace3d.stage",
     "trace_in_3d": "recon.trace3d.stage",
+    "evidence_pair": "recon.trace3d.stage",
     "ambiguous_stretches": "recon.trace3d.stage",
     "path_shift_px": "recon.trace3d.stage",
 }
