@@ -15,9 +15,12 @@ The model, per vessel of arc length s (mm) and lumen area A(s):
   arc length from its throat to its distal end (where the flow separates and expands).
 - Hyperemic flow driven by the mean aortic pressure Pa through the vessel into a distal
   (microvascular) resistance R set so that a healthy vessel of the proximal reference area
-  A_ref (the mean area over the first :attr:`FFRModel.reference_length_mm`) carries the mean
-  velocity v (0.35 m/s; Tu et al. 2014, 2016): R = Pa / (v A_ref). The flow solves
-  Pa - dP(Q) = R Q; FFR(s) = P(s) / Pa, the venous pressure taken as 0.
+  A_ref carries the mean velocity v (0.35 m/s; Tu et al. 2014, 2016): R = Pa / (v A_ref).
+  A_ref is the mean, over the first :attr:`FFRModel.reference_length_mm`, of the healthy
+  reference area (``FFRModel.inlet_area="reference"``, the default: the QCA's fitted
+  reference, so a wrong first millimetre of the lumen does not move R) or of the lumen's
+  own area (``"lumen"``, the issue's first definition; docs/ffr.md has both measured).
+  The flow solves Pa - dP(Q) = R Q; FFR(s) = P(s) / Pa, the venous pressure taken as 0.
 - A tree: each segment a vessel leaving its parent at ``join_s_mm`` of the parent's arc
   length. The healthy flow splits at each bifurcation by the reference diameters to the
   power k (7/3, Huo and Kassab 2012; 3, Murray 1926): each outlet's resistance is Pa over
@@ -60,6 +63,7 @@ __all__ = [
     "VELOCITY_RANGE_M_S",
     "SPLIT_EXPONENT_RANGE",
     "CLOSED_AREA_MM2",
+    "INLET_AREAS",
 ]
 
 MMHG_PA = 133.322387415  # Pa per mmHg
@@ -72,6 +76,9 @@ SPLIT_EXPONENT_RANGE = (2.0, 3.0)  # from area-preserving (2) to Murray (3)
 CLOSED_AREA_MM2 = 0.01
 #: The shortest segment (mm) beyond the proximal reference stretch.
 MIN_LENGTH_BEYOND_REFERENCE_MM = 2.0
+#: What A_ref averages over the proximal stretch (FFRModel.inlet_area): the QCA's fitted
+#: healthy reference area, or the lumen's own (smoothed) area.
+INLET_AREAS = ("reference", "lumen")
 RESEARCH_NOTE = ("a model estimate for research (angiography-derived, pressure-driven 1D "
                  "model); not validated against a pressure wire here")
 
@@ -99,6 +106,9 @@ class FFRModel:
     viscosity_pa_s, density_kg_m3 : blood's.
     kt : the separation (expansion) loss coefficient.
     reference_length_mm : the proximal stretch whose mean area is A_ref.
+    inlet_area : what A_ref averages over that stretch (:data:`INLET_AREAS`):
+        "reference", the QCA's fitted healthy reference area (default), or "lumen", the
+        lumen's own area.
     flow_band_m_s : the velocities of the band over the flow assumption.
     """
 
@@ -110,6 +120,7 @@ class FFRModel:
     kt: float = 1.52
     reference_length_mm: float = 3.0
     flow_band_m_s: tuple[float, float] = (0.25, 0.45)
+    inlet_area: str = "reference"
 
     def __post_init__(self) -> None:
         _in_range("aortic pressure", self.aortic_pressure_mmhg, *PRESSURE_RANGE_MMHG, "mmHg")
@@ -121,6 +132,9 @@ class FFRModel:
         _in_range("density", self.density_kg_m3, 900.0, 1200.0, "kg/m^3")
         _in_range("Kt", self.kt, 0.0, 5.0, "")
         _in_range("reference length", self.reference_length_mm, 0.5, 20.0, "mm")
+        if self.inlet_area not in INLET_AREAS:
+            raise FFRError(f"FFR: inlet area {self.inlet_area!r} is not one of "
+                           f"{', '.join(INLET_AREAS)}")
 
     def at_velocity(self, velocity_m_s: float) -> FFRModel:
         """The same model at another velocity."""
@@ -163,10 +177,12 @@ class Lumen:
         """The reference diameter (mm) at arc length ``s_mm`` (held beyond the ends)."""
         return float(np.sqrt(4.0 / np.pi * np.interp(s_mm, self.s_mm, self.reference_area_mm2)))
 
-    def inlet_area_mm2(self, length_mm: float) -> float:
-        """A_ref: the mean area over the first ``length_mm`` (at least the first point)."""
+    def inlet_area_mm2(self, length_mm: float, source: str = "reference") -> float:
+        """A_ref: the mean over the first ``length_mm`` (at least the first point) of the
+        reference area (``source="reference"``) or of the lumen's area (``"lumen"``)."""
         near = self.s_mm <= self.s_mm[0] + length_mm
-        return float(np.mean(self.area_mm2[near]))
+        values = self.reference_area_mm2 if source == "reference" else self.area_mm2
+        return float(np.mean(values[near]))
 
 
 def _cumtrapz(f: FloatArray, s: FloatArray) -> FloatArray:
@@ -331,7 +347,8 @@ def _add_network(config: dict, n: int, vessels: Sequence[FFRVessel], model: FFRM
         pieces.append(_Pieces(np.array([s[0], *sorted(at), s[-1]]), a, b))
     # healthy flow into each vessel and the share that goes on past each cut
     healthy = np.zeros(len(vessels))
-    healthy[0] = model.velocity_m_s * vessels[0].lumen.inlet_area_mm2(model.reference_length_mm)
+    healthy[0] = model.velocity_m_s * vessels[0].lumen.inlet_area_mm2(
+        model.reference_length_mm, model.inlet_area)
     outlet_flow = np.zeros(len(vessels))
     for k, v in enumerate(vessels):
         flow = healthy[k]

@@ -220,3 +220,52 @@ def test_the_separation_loss_of_many_narrowings_is_their_sum():
             (s >= s[throat]).astype(float)
         expected += c * ramp
     np.testing.assert_allclose(b, expected, rtol=1e-12, atol=1e-15)
+
+
+def _wide_start_tube(wide_mm: float = 3.5, r0: float = 1.5) -> Lumen:
+    """A 40 mm tube of radius r0 whose first ``wide_mm`` have twice the radius (a trace
+    that starts on the guiding catheter), its reference r0 throughout."""
+    s = np.arange(0.0, 40.0 + STEP / 2, STEP)
+    r = np.where(s <= wide_mm, 2.0 * r0, r0)
+    return Lumen(s, np.pi * r**2, np.full(s.shape, np.pi * r0**2))
+
+
+def test_a_ref_from_the_reference_ignores_a_wrong_first_millimetre():
+    """R = Pa / (v A_ref): from the fitted reference (the default) A_ref is pi r0^2 however
+    wide the first 3 mm of the lumen are; from the lumen (inlet_area="lumen") it is their
+    mean area, 4 pi r0^2 here, a quarter of the resistance."""
+    lumen = _wide_start_tube()
+    assert FFRModel().inlet_area == "reference"
+    for source, area_ref in (("reference", np.pi * 1.5**2), ("lumen", 4.0 * np.pi * 1.5**2)):
+        result = tree_ffr([FFRVessel(lumen)], FFRModel(inlet_area=source))[0]
+        resistance = 100.0 / (0.35 * area_ref)
+        assert result.distal * 100.0 / result.flow_ml_s == pytest.approx(resistance, rel=1e-6)
+        # the distal pressure is R Q; the loss the lumen's viscous integral at that flow
+        a, b = loss_coefficients(lumen, MODEL)
+        q = result.flow_ml_s
+        assert b[-1] == 0.0
+        assert q == pytest.approx(100.0 / (resistance + a[-1]), rel=1e-6)
+    # on a healthy tube the two agree
+    healthy = tube(40.0, 1.5)
+    assert tree_ffr([FFRVessel(healthy)], FFRModel(inlet_area="lumen"))[0].distal == \
+        pytest.approx(tree_ffr([FFRVessel(healthy)])[0].distal, rel=1e-12)
+
+
+def test_a_ref_from_the_reference_averages_a_tapering_reference():
+    """A tapering reference d(s) = 3.2 - 0.02 s mm: A_ref is the mean of pi d^2 / 4 over the
+    points of the first 3 mm (s = 0, 0.1, ..., 3.0), not the lumen's area there."""
+    s = np.arange(0.0, 40.0 + STEP / 2, STEP)
+    d = 3.2 - 0.02 * s
+    lumen = Lumen(s, np.pi / 4.0 * (0.9 * d) ** 2, np.pi / 4.0 * d**2)
+    first = np.arange(31) * 0.1
+    expected = float(np.mean(np.pi / 4.0 * (3.2 - 0.02 * first) ** 2))
+    assert lumen.inlet_area_mm2(3.0) == pytest.approx(expected, rel=1e-12)
+    assert lumen.inlet_area_mm2(3.0, "lumen") == pytest.approx(0.81 * expected, rel=1e-12)
+    result = tree_ffr([FFRVessel(lumen)])[0]
+    assert result.distal * 100.0 / result.flow_ml_s == pytest.approx(
+        100.0 / (0.35 * expected), rel=1e-6)
+
+
+def test_an_unknown_inlet_area_is_refused():
+    with pytest.raises(FFRError, match="inlet area 'raw' is not one of reference, lumen"):
+        FFRModel(inlet_area="raw")
