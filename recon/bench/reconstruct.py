@@ -33,14 +33,20 @@ centerline), and the fraction of cases with an MLD spread of at most
 :data:`STABLE_MLD_SPREAD_MM` and a site spread of at most
 :data:`STABLE_SITE_SPREAD_MM` (a case with a failed run is not stable).
 ``lesion_set_stable`` is the fraction of cases whose set of lesions
-(:mod:`recon.lumen.lesions`: every narrowing that passes the lesion criterion) is
-the same in the base run and all N jittered runs
-(:func:`recon.lumen.lesions.lesion_sets_equal`: as many, each one's MLD inside the
-other's extent; a case with a failed run is not stable). ``lesion_set_stable_delta``
-is the same figure had every narrowing of at least the disease threshold delta
-been a lesion (no % stenosis floor), to show what the floor buys;
-``lesion_set_stable_completed`` is ``lesion_set_stable`` over the cases whose runs all
-ran (a refused jittered trace leaves no lesion set to compare).
+(:mod:`recon.lumen.lesions`: every narrowing that passes the lesion criterion,
+tandems less than 3 reference diameters apart merged into one lesion) is the same in
+the base run and all N jittered runs (:func:`recon.lumen.lesions.lesion_sets_equal`,
+rule "overlap": as many, paired proximal to distal, each pair's extents overlapping;
+a case with a failed run is not stable). Issue 46's second pass changed what it
+compares (before: every narrowing past the floor its own lesion, paired by each one's
+MLD inside the other's extent); ``lesion_set_stable_unmerged`` keeps that comparison
+(rule "mld", no tandem merge) on the same runs, so the two figures stand side by side.
+``lesion_set_stable_delta`` is ``lesion_set_stable`` had every narrowing of at least
+the disease threshold delta been a lesion (no % stenosis floor), to show what the
+floor buys; ``lesion_set_stable_completed`` is ``lesion_set_stable`` over the cases
+whose runs all ran (a refused jittered trace leaves no lesion set to compare). The
+borderline narrowings (below the floor, their interval reaching it) are listed per
+run in ``borderline_sets`` and are not lesions.
 """
 
 from __future__ import annotations
@@ -93,7 +99,7 @@ def evaluate_case(case: PhantomCase, options: ReconstructionOptions, *,
         row["consistency_ok"] = None if consistency is None else bool(consistency.ok)
         row["flagged_stretches"] = 0 if consistency is None else len(consistency.stretches)
         row["warnings"] = list(getattr(rec, "warnings", ()))
-        row["lesions"], row["lesions_delta"] = _lesion_sets(rec)
+        row["lesion_sets"] = _lesion_sets(rec)
         row.update(_trace_figures(case, rec))
         row["mappings"] = [getattr(rec.centerline_a, "intensity_mapping", None),
                            getattr(rec.centerline_b, "intensity_mapping", None)]
@@ -122,18 +128,29 @@ def _trace_figures(case: PhantomCase, rec: Reconstruction) -> dict:
     return out
 
 
-def _lesion_sets(rec: Reconstruction) -> tuple[list[dict], list[dict]]:
-    """The run's lesions (their sites, extents and %DS), and those it would have with
-    every supported narrowing of at least delta a lesion (no % stenosis floor)."""
-    from recon.lumen.measure import narrowings
+#: The lesion-set stability figures: (key, which set of :func:`_lesion_sets`, rule).
+LESION_SET_FIGURES = (("lesion_set_stable", "lesions", "overlap"),
+                      ("lesion_set_stable_delta", "delta", "overlap"),
+                      ("lesion_set_stable_unmerged", "unmerged", "mld"))
+
+
+def _lesion_sets(rec: Reconstruction) -> dict[str, list[dict]]:
+    """The run's lesions (their sites, extents and %DS; tandems merged), those it would
+    have with every supported narrowing of at least delta a lesion (no % stenosis floor;
+    tandems merged), every supported narrowing past the floor on its own (no merge:
+    the comparison before issue 46's second pass) and the borderline narrowings."""
+    from recon.lumen.measure import lesions_of, narrowings
 
     def brief(n) -> dict:
         return {"mld_s_mm": round(n.mld_s_mm, 2), "start_s_mm": round(n.start_s_mm, 2),
                 "end_s_mm": round(n.end_s_mm, 2),
                 "diameter_stenosis_pct": round(n.diameter_stenosis_pct, 1)}
 
-    return ([brief(les.narrowing) for les in rec.lesions.lesions],
-            [brief(n) for n in narrowings(rec.profile, min_ds_pct=0.0) if n.supported])
+    report = rec.lesions
+    return {"lesions": [brief(les.narrowing) for les in report.lesions],
+            "delta": [brief(n) for n in lesions_of(rec.profile, min_ds_pct=0.0)],
+            "unmerged": [brief(n) for n in narrowings(rec.profile) if n.supported],
+            "borderline": [brief(b.narrowing) for b in report.borderline]}
 
 
 def closed_truth_volume_mm3(truth: PhantomTruth) -> float:
@@ -388,7 +405,7 @@ def _jitter_case(case: PhantomCase, options: ReconstructionOptions, n: int,
     a, b = case_angiograms(case)
     rng = np.random.default_rng([case.seed, 7919, n])
     mld, ds, site, errors = [], [], [], []
-    sets = [] if base is None else [(base["lesions"], base["lesions_delta"])]
+    sets = [] if base is None else [base["lesion_sets"]]
     for _ in range(n):
         seeds = jitter_seeds(case.seeds, rng, JITTER_PX, a.shape, b.shape)
         try:
@@ -421,12 +438,14 @@ def _jitter_case(case: PhantomCase, options: ReconstructionOptions, n: int,
     out["mld_stable"] = bool(all_ran and out["mld_spread_mm"] <= STABLE_MLD_SPREAD_MM)
     out["site_stable"] = bool(all_ran and out["site_spread_mm"] <= STABLE_SITE_SPREAD_MM)
     out["stable"] = out["mld_stable"] and out["site_stable"]
-    out["lesion_counts"] = [len(les) for les, _ in sets]
-    out["lesion_sets"] = [les for les, _ in sets]
-    out["lesion_sets_delta"] = [les for _, les in sets]
-    for key, k in (("lesion_set_stable", 0), ("lesion_set_stable_delta", 1)):
+    out["lesion_counts"] = [len(one["lesions"]) for one in sets]
+    for which in ("lesions", "delta", "unmerged", "borderline"):
+        out["lesion_sets" if which == "lesions" else f"{which}_sets"] = [one[which]
+                                                                         for one in sets]
+    for key, which, rule in LESION_SET_FIGURES:
         out[key] = bool(all_ran and base is not None
-                        and all(lesion_sets_equal(sets[0][k], other[k]) for other in sets[1:]))
+                        and all(lesion_sets_equal(sets[0][which], other[which], rule)
+                                for other in sets[1:]))
     return out
 
 
@@ -445,8 +464,7 @@ def _stability_figures(cases: list[dict]) -> dict:
         "ds_spread_pct_max": percentile([c["ds_spread_pct"] for c in cases], 100),
         "site_spread_mm_median": median(c["site_spread_mm"] for c in cases),
         "site_spread_mm_max": percentile([c["site_spread_mm"] for c in cases], 100),
-        "lesion_set_stable": _fraction(cases, "lesion_set_stable"),
-        "lesion_set_stable_delta": _fraction(cases, "lesion_set_stable_delta"),
+        **{key: _fraction(cases, key) for key, _, _ in LESION_SET_FIGURES},
         # the same over the cases whose runs all ran (a refused trace has no lesion set)
         "lesion_set_stable_completed": _fraction(
             [c for c in cases if c["failed_runs"] == 0 and not c["base_failed"]],
@@ -592,7 +610,7 @@ def _format_stability(st: dict) -> list[str]:
              f"up to {st['jitter_px']:g} px (spreads: max - min; medians unless 'max')",
              f"{'':<22}{'cases':>6}{'stable':>8}{'MLD<=0.1':>9}{'site<=2':>8}"
              f"{'MLD spr':>8}{'max':>7}{'%DS spr':>8}{'site spr':>9}{'max':>7}{'fail':>5}"
-             f"{'lesions':>8}{'(delta)':>8}"]
+             f"{'lesions':>8}{'(delta)':>8}{'(old)':>6}"]
     for name, f in [*st["chains"].items(), ("overall", st["overall"])]:
         lines.append(
             f"{name:<22}{f['cases']:>6}{f['stable_fraction']:>8.2f}"
@@ -600,7 +618,9 @@ def _format_stability(st: dict) -> list[str]:
             f"{f['mld_spread_mm_median']:>8.3f}{f['mld_spread_mm_max']:>7.2f}"
             f"{f['ds_spread_pct_median']:>8.1f}{f['site_spread_mm_median']:>9.2f}"
             f"{f['site_spread_mm_max']:>7.1f}{f['cases_with_failed_runs']:>5}"
-            f"{f['lesion_set_stable']:>8.2f}{f['lesion_set_stable_delta']:>8.2f}")
+            f"{f['lesion_set_stable']:>8.2f}{f['lesion_set_stable_delta']:>8.2f}"
+            f"{f['lesion_set_stable_unmerged']:>6.2f}")
     lines.append("lesions: the share of cases whose set of lesions is the same in every run "
-                 "(delta: had every narrowing past the disease threshold been a lesion)")
+                 "(delta: had every narrowing past the disease threshold been a lesion; old: "
+                 "every narrowing past the floor its own lesion, paired by MLD site)")
     return lines

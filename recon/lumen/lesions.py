@@ -1,7 +1,9 @@
 """Every lesion of a segment, with 95 % intervals, and which one is "the" lesion.
 
 :func:`recon.lumen.measure.narrowings` finds every narrowing of a lumen profile and
-says which are lesions (supported). Here:
+says which are supported; :func:`recon.lumen.measure.lesions_of` keeps those of at
+least the 25 % floor and merges tandems (narrowings less than 3 reference diameters
+apart are one lesion, as the SYNTAX score counts them). Here:
 
 - :func:`lesion_report` numbers the lesions proximal to distal (lesion 1, 2, ...)
   and gives each its 95 % intervals from the geometry posterior's draws
@@ -12,6 +14,15 @@ says which are lesions (supported). Here:
   most (0 when the draw finds none there, counted in ``found_fraction``). An
   interval is the reported value +- 1.96 sd of the draws (centred on the reported
   figure, as the segment's intervals are), lengths and diameters clipped at 0.
+  A lesion made of a tandem lists its narrowings (``parts``); a lesion whose % diameter
+  stenosis interval reaches below the floor is marked ``borderline``.
+- Borderline narrowings (``LesionReport.borderline``): supported narrowings below the
+  floor whose % diameter stenosis 95 % interval reaches it, outside every lesion,
+  listed with their intervals next to the lesions (report.json
+  ``lesion_assessment.borderline``), so that a narrowing near the floor, which click
+  noise lifts above it in one run and not in another, is shown in every run rather
+  than appearing and vanishing as a lesion without a word (issue 46). They are not
+  lesions: no primary is chosen among them.
 - The primary lesion (the segment's ``measurements``) is the most severe by %
   diameter stenosis. It is unambiguous only when its % diameter stenosis lies above
   every other lesion's 95 % interval; otherwise ``primary_ambiguous`` is True and
@@ -37,7 +48,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from recon.geometry import ViewGeometry
-from recon.lumen.measure import LumenProfile, Narrowing, narrowings
+from recon.lumen.measure import (
+    MIN_LESION_DS_PCT,
+    LumenProfile,
+    Narrowing,
+    lesions_of,
+    narrowings,
+    tandem_groups,
+)
 
 FloatArray = NDArray[np.float64]
 
@@ -70,9 +88,18 @@ class Lesion:
     narrowing: Narrowing
     ci95: dict = field(default_factory=dict)
     found_fraction: float | None = None
+    parts: tuple[Narrowing, ...] = ()  # a tandem's narrowings (module docstring), else ()
+
+    @property
+    def borderline(self) -> bool:
+        """True when its % diameter stenosis 95 % interval reaches below the lesion floor
+        (False without intervals)."""
+        ci = self.ci95.get("diameter_stenosis_pct")
+        return ci is not None and ci[0] < MIN_LESION_DS_PCT
 
     def to_dict(self) -> dict:
-        """JSON-ready: number, site, the figures and ``ci95``."""
+        """JSON-ready: number, site, the figures, ``ci95``, ``borderline`` and a tandem's
+        ``parts`` (each narrowing's MLD site, % DS and extent)."""
         n = self.narrowing
         return {
             "number": self.number,
@@ -89,6 +116,10 @@ class Lesion:
             "zone": n.zone or None,
             "ci95": {k: [float(lo), float(hi)] for k, (lo, hi) in self.ci95.items()} or None,
             "found_fraction": self.found_fraction,
+            "borderline": self.borderline,
+            "parts": [{"mld_s_mm": p.mld_s_mm, "diameter_stenosis_pct": p.diameter_stenosis_pct,
+                       "start_s_mm": p.start_s_mm, "end_s_mm": p.end_s_mm}
+                      for p in self.parts],
         }
 
 
@@ -98,6 +129,15 @@ def _unconfirmed(n: Narrowing) -> str:
            if n.zone == "ostium" else "where a trace starts or fades")
     return (f"a {n.diameter_stenosis_pct:.0f} % narrowing at {n.mld_s_mm:.1f} mm ({n.zone}) "
             f"is not confirmed: {why}, and past it the profile is not narrowed")
+
+
+def _borderline_clause(b: Lesion) -> str:
+    """A borderline narrowing in one clause."""
+    n = b.narrowing
+    lo, hi = b.ci95["diameter_stenosis_pct"]
+    return (f"a borderline {n.diameter_stenosis_pct:.0f} % narrowing ({lo:.0f} to {hi:.0f} %) at "
+            f"{n.mld_s_mm:.1f} mm: below the {MIN_LESION_DS_PCT:.0f} % lesion floor, but its "
+            "95 % interval reaches it")
 
 
 def _site(n: Narrowing) -> str:
@@ -118,6 +158,7 @@ class LesionReport:
     ambiguous_with: tuple[int, ...] = ()  # lesion numbers whose interval reaches the primary
     trusted_mm: tuple[float, float] = (0.0, 0.0)
     ostium: bool = False
+    borderline: tuple[Lesion, ...] = ()  # narrowings below the floor whose interval reaches it
 
     @property
     def primary_lesion(self) -> Lesion | None:
@@ -126,7 +167,8 @@ class LesionReport:
     def summary(self) -> str:
         """One line: how many lesions, which is the primary and whether it stands out, and
         the narrowings not confirmed."""
-        return "; ".join([self._lesions_line(), *(_unconfirmed(n) for n in self.unsupported)])
+        return "; ".join([self._lesions_line(), *(_borderline_clause(b) for b in self.borderline),
+                          *(_unconfirmed(n) for n in self.unsupported)])
 
     def _lesions_line(self) -> str:
         if not self.lesions:
@@ -159,6 +201,8 @@ class LesionReport:
             "summary": self.summary(),
             "trusted_s_mm": [float(v) for v in self.trusted_mm],
             "proximal_zone": "ostium" if self.ostium else "clicked end",
+            "floor_pct": MIN_LESION_DS_PCT,
+            "borderline": [b.to_dict() for b in self.borderline],
             "unsupported": [{"site": _site(n), "diameter_stenosis_pct": n.diameter_stenosis_pct,
                              "mld_s_mm": n.mld_s_mm, "start_s_mm": n.start_s_mm,
                              "end_s_mm": n.end_s_mm, "zone": n.zone}
@@ -170,12 +214,13 @@ def lesion_report(profile: LumenProfile, draws: Sequence[LumenProfile] = ()) -> 
     """The lesions of ``profile`` with intervals from the posterior draws' profiles
     (module docstring); each draw must have the profile's M points."""
     found = narrowings(profile)
-    supported = [n for n in found if n.supported]
+    groups = tandem_groups([n for n in found if n.supported])
     draws = [d for d in draws if len(d.s_mm) == len(profile.s_mm)]
     lesions = []
-    for k, n in enumerate(supported, start=1):
+    for k, (n, group) in enumerate(zip(lesions_of(profile), groups, strict=True), start=1):
         ci, frac = _intervals(profile, n, draws) if len(draws) >= 2 else ({}, None)
-        lesions.append(Lesion(number=k, narrowing=n, ci95=ci, found_fraction=frac))
+        lesions.append(Lesion(number=k, narrowing=n, ci95=ci, found_fraction=frac,
+                              parts=group if len(group) > 1 else ()))
     primary, ambiguous, others = None, False, ()
     if lesions:
         primary = int(np.argmax([les.narrowing.diameter_stenosis_pct for les in lesions]))
@@ -190,7 +235,27 @@ def lesion_report(profile: LumenProfile, draws: Sequence[LumenProfile] = ()) -> 
     return LesionReport(lesions=tuple(lesions), unsupported=tuple(n for n in found
                                                                    if not n.supported),
                         primary=primary, primary_ambiguous=ambiguous, ambiguous_with=others,
-                        trusted_mm=profile.trusted_range_mm, ostium=profile.ostium)
+                        trusted_mm=profile.trusted_range_mm, ostium=profile.ostium,
+                        borderline=_borderline(profile, lesions, draws))
+
+
+def _borderline(profile: LumenProfile, lesions: Sequence[Lesion],
+                draws: Sequence[LumenProfile]) -> tuple[Lesion, ...]:
+    """The supported narrowings below the floor, outside every lesion, whose % diameter
+    stenosis 95 % interval reaches the floor, numbered proximal to distal (none without
+    at least two draws)."""
+    if len(draws) < 2:
+        return ()
+    out = []
+    for n in narrowings(profile, min_ds_pct=0.0):
+        if not n.supported or n.diameter_stenosis_pct >= MIN_LESION_DS_PCT or any(
+                les.narrowing.start_s_mm <= n.mld_s_mm <= les.narrowing.end_s_mm
+                for les in lesions):
+            continue
+        ci, frac = _intervals(profile, n, draws)
+        if ci["diameter_stenosis_pct"][1] >= MIN_LESION_DS_PCT:
+            out.append(Lesion(number=len(out) + 1, narrowing=n, ci95=ci, found_fraction=frac))
+    return tuple(out)
 
 
 def _intervals(profile: LumenProfile, lesion: Narrowing, draws: Sequence[LumenProfile]
@@ -236,23 +301,37 @@ def _overlapping_length(draw: LumenProfile, start: float, end: float) -> float:
     """Length (mm) of the draw's lesion that overlaps [start, end] (the draw's own arc
     lengths) most; 0 for none."""
     best, overlap = 0.0, 0.0
-    for n in narrowings(draw):
+    for n in lesions_of(draw):
         o = min(n.end_s_mm, end) - max(n.start_s_mm, start)
-        if n.supported and o > overlap:
+        if o > overlap:
             best, overlap = n.length_mm, o
     return best
 
 
-def lesion_sets_equal(a: Sequence[dict], b: Sequence[dict]) -> bool:
-    """Whether two runs found the same lesions: as many, and paired proximal to distal,
-    each one's MLD inside the other's extent (``start_s_mm``..``end_s_mm``).
-    ``a``, ``b``: lists of :meth:`Lesion.to_dict` (report.json's ``lesions``)."""
+def lesion_sets_equal(a: Sequence[dict], b: Sequence[dict], rule: str = "overlap") -> bool:
+    """Whether two runs found the same lesions: as many, paired proximal to distal, and
+    each pair the same lesion. ``a``, ``b``: lists of :meth:`Lesion.to_dict`
+    (report.json's ``lesions``; ``mld_s_mm``, ``start_s_mm``, ``end_s_mm`` are read).
+
+    ``rule="overlap"``: a pair is one lesion when their extents (``start_s_mm`` ..
+    ``end_s_mm``) overlap: they cover the same stretch of vessel, wherever along it each
+    run found the least diameter. ``rule="mld"`` (the rule before issue 46's second
+    pass, kept to report the old figure beside the new): each one's MLD inside the
+    other's extent, which calls one long lesion two when its MLD moves between two
+    minima of similar depth.
+    """
+    if rule not in ("overlap", "mld"):
+        raise ValueError(f"rule must be 'overlap' or 'mld', got {rule!r}")
     if len(a) != len(b):
         return False
     for x, y in zip(sorted(a, key=lambda d: d["mld_s_mm"]), sorted(b, key=lambda d: d["mld_s_mm"]),
                     strict=True):
-        if not (y["start_s_mm"] <= x["mld_s_mm"] <= y["end_s_mm"]
-                and x["start_s_mm"] <= y["mld_s_mm"] <= x["end_s_mm"]):
+        if rule == "overlap":
+            same = min(x["end_s_mm"], y["end_s_mm"]) > max(x["start_s_mm"], y["start_s_mm"])
+        else:
+            same = (y["start_s_mm"] <= x["mld_s_mm"] <= y["end_s_mm"]
+                    and x["start_s_mm"] <= y["mld_s_mm"] <= x["end_s_mm"])
+        if not same:
             return False
     return True
 

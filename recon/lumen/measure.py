@@ -35,10 +35,20 @@ Definitions used here (documented because QCA packages differ):
 - Lesion: a narrowing of at least :data:`MIN_LESION_DS_PCT` % diameter stenosis
   (and of a deficit at least delta) whose peak lies in the trusted stretch, or,
   peaking inside a zone, whose narrowing the trusted profile supports: its core
-  reaches into the trusted stretch (the deficit at the zone's inner edge is still
-  at least half its peak value, and at least delta). A narrowing confined to a
-  zone is reported as unsupported, not as a lesion.
-- MLD / MLA: the minima of the smoothed diameter / area inside a lesion. The
+  reaches into the trusted stretch (its own extent reaches the zone's inner edge, and
+  the deficit there is still at least half its peak value, and at least delta; a
+  deeper neighbour's deficit at the edge does not support it). A narrowing confined
+  to a zone is reported as unsupported, not as a lesion.
+- Tandem narrowings: lesions separated by less than :data:`TANDEM_GAP_RVD` reference
+  diameters (the gap between one's end and the next one's start, the reference there
+  the mean of their two) are one lesion, as the SYNTAX score counts them (Sianos et
+  al., EuroIntervention 2005;1:219-227: lesions within 3 vessel reference diameters
+  of each other are scored as one). The lesion spans its narrowings; its MLD, MLA,
+  reference and % stenoses are those of its most severe narrowing
+  (:func:`lesions_of`). Two minima of one diseased stretch, or a shoulder that the
+  click noise lifts above or below the floor, are thus not separate lesions that
+  come and go (issue 46).
+- MLD / MLA: the minima of the smoothed diameter / area inside a narrowing. The
   measurements (:class:`Measurements`) are the most severe lesion's (by % diameter
   stenosis); with no lesion, the minima over the trusted stretch. % diameter
   stenosis = 100 (1 - MLD / ref(s_MLD)), % area stenosis =
@@ -54,7 +64,7 @@ that comes and goes with the click noise.
 from __future__ import annotations
 
 import functools
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, replace
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -68,7 +78,10 @@ __all__ = [
     "lumen_profile",
     "measure_lumen",
     "narrowings",
+    "lesions_of",
+    "tandem_groups",
     "END_ZONE_MM",
+    "TANDEM_GAP_RVD",
     "MIN_LESION_DS_PCT",
 ]
 
@@ -82,6 +95,8 @@ END_ZONE_MM = 5.0
 END_ZONE_FRACTION = 0.2
 #: Least % diameter stenosis of a lesion (module docstring).
 MIN_LESION_DS_PCT = 25.0
+#: Lesions closer than this many reference diameters are one lesion (module docstring).
+TANDEM_GAP_RVD = 3.0
 _MIN_TRUSTED_POINTS = 12
 
 
@@ -478,12 +493,50 @@ def narrowings(profile: LumenProfile, min_ds_pct: float = MIN_LESION_DS_PCT
                 ("ostium" if profile.ostium else "proximal end") if s[peak] < lo
                 else "distal end")
         edge = lo if s[peak] < lo else hi
-        supported = not zone or float(np.interp(edge, s, deficit)) >= max(
-            delta, 0.5 * float(deficit[peak]))
+        reaches = start <= edge <= end  # its own extent reaches the trusted stretch
+        supported = not zone or (reaches and float(np.interp(edge, s, deficit)) >= max(
+            delta, 0.5 * float(deficit[peak])))
         n = _narrowing(profile, start, end, peak, zone, supported)
         if n.diameter_stenosis_pct >= min_ds_pct:
             out.append(n)
     return tuple(sorted(out, key=lambda n: n.peak_s_mm))
+
+
+def tandem_groups(found: tuple[Narrowing, ...] | list[Narrowing],
+                  gap_rvd: float = TANDEM_GAP_RVD) -> list[tuple[Narrowing, ...]]:
+    """The lesions ``found`` (proximal to distal) grouped into tandems: consecutive ones
+    whose gap (next start - previous end, mm) is less than ``gap_rvd`` times the mean of
+    their reference diameters share a group (module docstring)."""
+    groups: list[list[Narrowing]] = []
+    for n in sorted(found, key=lambda n: n.peak_s_mm):
+        if groups:
+            prev = groups[-1][-1]
+            rvd = 0.5 * (prev.reference_diameter_mm + n.reference_diameter_mm)
+            if n.start_s_mm - prev.end_s_mm < gap_rvd * rvd:
+                groups[-1].append(n)
+                continue
+        groups.append([n])
+    return [tuple(g) for g in groups]
+
+
+def merge_tandem(group: tuple[Narrowing, ...]) -> Narrowing:
+    """One lesion from a tandem group: its most severe narrowing's figures (MLD, MLA,
+    reference, % stenoses, zone) over the group's whole extent."""
+    main = max(group, key=lambda n: n.diameter_stenosis_pct)
+    if len(group) == 1:
+        return main
+    start = min(n.start_s_mm for n in group)
+    end = max(n.end_s_mm for n in group)
+    return replace(main, start_s_mm=start, end_s_mm=end, length_mm=end - start,
+                   zone=main.zone if all(n.zone for n in group) else "")
+
+
+def lesions_of(profile: LumenProfile, min_ds_pct: float = MIN_LESION_DS_PCT
+               ) -> tuple[Narrowing, ...]:
+    """The lesions of the profile, proximal to distal: its supported narrowings of at least
+    ``min_ds_pct`` % diameter stenosis, tandems merged (module docstring)."""
+    return tuple(merge_tandem(g) for g in tandem_groups(
+        [n for n in narrowings(profile, min_ds_pct) if n.supported]))
 
 
 def measure_lumen(profile: LumenProfile) -> Measurements:
@@ -500,7 +553,7 @@ def measure_lumen(profile: LumenProfile) -> Measurements:
     """
     s = profile.s_mm
     length = float(s[-1] - s[0])
-    lesions = [n for n in narrowings(profile) if n.supported]
+    lesions = lesions_of(profile)
     if lesions:
         return max(lesions, key=lambda n: n.diameter_stenosis_pct).measurements(length)
     trusted = profile.trusted

@@ -203,3 +203,90 @@ def test_the_real_phantoms_distal_end_does_not_flip_into_a_lesion():
     for r in runs:  # the MLD's place stays on the segment
         lo, hi = r.intervals.ci95["mld_s_mm"]
         assert 0.0 <= lo <= hi <= r.measurements.segment_length_mm + 1e-6
+
+
+# ------------------------------------------------ issue 46, second pass: the set of lesions
+def test_tandem_narrowings_closer_than_three_reference_diameters_are_one_lesion():
+    """Two 40 % / 30 % cosines whose extents are 4 mm apart on a ~2.8 mm vessel (3 RVD ~
+    8.5 mm) are one lesion spanning both, with the more severe one's figures; 20 mm apart
+    they are two."""
+    from recon.lumen.measure import lesions_of
+
+    near = profile_of([(0.4, 6.0, 30.0), (0.3, 6.0, 40.0)])  # edges 33 and 37: gap 4 mm
+    (n1, n2) = narrowings(near)
+    (les,) = lesions_of(near)
+    assert les.start_s_mm == pytest.approx(n1.start_s_mm)
+    assert les.end_s_mm == pytest.approx(n2.end_s_mm)
+    assert les.length_mm == pytest.approx(les.end_s_mm - les.start_s_mm)
+    assert les.mld_s_mm == n1.mld_s_mm and les.diameter_stenosis_pct == pytest.approx(40.0, abs=1)
+    report = lesion_report(near)
+    (one,) = report.lesions
+    assert [p.mld_s_mm for p in one.parts] == [n1.mld_s_mm, n2.mld_s_mm]
+    assert [p["mld_s_mm"] for p in one.to_dict()["parts"]] == [n1.mld_s_mm, n2.mld_s_mm]
+    m = measure_lumen(near)  # the measurements are the merged lesion's
+    assert m.lesion_length_mm == pytest.approx(les.length_mm) and m.mld_s_mm == n1.mld_s_mm
+    far = profile_of([(0.4, 6.0, 25.0), (0.3, 6.0, 51.0)])  # gap 20 mm
+    assert len(lesions_of(far)) == 2 and all(not les.parts for les in lesion_report(far).lesions)
+
+
+def test_a_zone_narrowing_is_not_supported_by_a_deeper_neighbours_deficit():
+    """A 1 mm dip in the last millimetre, right past a long deeper narrowing whose deficit
+    still covers the distal end zone's edge (as on varied case 8600): the dip's own
+    extent does not reach the trusted stretch, so it is not a lesion (before, the
+    neighbour's deficit at the edge made it one)."""
+    end = S[-1]
+    prof = profile_of([(0.5, 16.0, end - 9.0), (0.35, 2.0, end - 0.5)])
+    lo, hi = prof.trusted_range_mm
+    dip = [n for n in narrowings(prof) if n.mld_s_mm > hi]
+    assert len(dip) == 1 and dip[0].zone == "distal end"
+    assert dip[0].diameter_stenosis_pct > 30.0
+    assert np.interp(hi, prof.s_mm, prof.relative_deficit) > 0.5 * 0.35  # the neighbour's
+    assert dip[0].start_s_mm > hi and not dip[0].supported
+
+
+def test_a_borderline_narrowing_is_listed_with_its_interval_and_is_not_a_lesion():
+    """A 22 % narrowing whose draws scatter it by +- 6 points (sd) has a 95 % interval
+    reaching 25 %: listed as borderline (report.json's lesion_assessment.borderline and
+    the summary), not as a lesion; a tight one (sd 0.5 point) is not listed; a 30 %
+    lesion whose interval reaches below 25 % is a lesion marked borderline."""
+    rng = np.random.default_rng(5)
+    spots = [(0.45, 8.0, 25.0), (0.22, 6.0, 55.0)]
+
+    def draws(scale, at=55.0):
+        out = []
+        for _ in range(32):
+            r = narrowed(S, spots)
+            r = r * (1.0 + scale * rng.standard_normal() * np.exp(-((S - at) / 2.0) ** 2))
+            out.append(lumen_profile(S, np.pi * r**2))
+        return out
+
+    prof = profile_of(spots)
+    wide = lesion_report(prof, draws(0.06))
+    assert len(wide.lesions) == 1 and not wide.lesions[0].borderline
+    (b,) = wide.borderline
+    lo, hi = b.ci95["diameter_stenosis_pct"]
+    assert b.narrowing.diameter_stenosis_pct == pytest.approx(22.0, abs=1.0)
+    assert lo < 22.0 < 25.0 <= hi
+    a = wide.assessment()
+    assert a["floor_pct"] == 25.0 and len(a["borderline"]) == 1
+    assert a["borderline"][0]["ci95"]["diameter_stenosis_pct"] == [lo, hi]
+    assert "borderline 22 % narrowing" in wide.summary()
+    assert lesion_report(prof, draws(0.005)).borderline == ()
+    assert lesion_report(prof).borderline == ()  # no draws, no interval: nothing to say
+    spots[1] = (0.30, 6.0, 55.0)
+    prof = profile_of(spots)
+    marked = lesion_report(prof, draws(0.08))
+    assert len(marked.lesions) == 2 and marked.lesions[1].borderline
+    assert marked.lesions[1].to_dict()["borderline"] and marked.borderline == ()
+
+
+def test_lesion_sets_compare_by_overlap_and_the_old_rule_by_mld():
+    """One long lesion whose MLD moves between two minima 6 mm apart: the same lesion by
+    overlapping extents, two different ones by the old MLD-in-extent rule."""
+    a = [{"mld_s_mm": 53.6, "start_s_mm": 49.3, "end_s_mm": 57.1}]
+    b = [{"mld_s_mm": 57.6, "start_s_mm": 47.8, "end_s_mm": 62.8}]
+    assert lesion_sets_equal(a, b) and not lesion_sets_equal(a, b, rule="mld")
+    c = [{"mld_s_mm": 60.0, "start_s_mm": 57.2, "end_s_mm": 63.0}]  # touches nothing of a
+    assert not lesion_sets_equal(a, c)
+    with pytest.raises(ValueError, match="rule"):
+        lesion_sets_equal(a, b, rule="near")
