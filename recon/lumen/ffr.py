@@ -16,10 +16,10 @@ The model, per vessel of arc length s (mm) and lumen area A(s):
 - Hyperemic flow driven by the mean aortic pressure Pa through the vessel into a distal
   (microvascular) resistance R set so that a healthy vessel of the proximal reference area
   A_ref carries the mean velocity v (0.35 m/s; Tu et al. 2014, 2016): R = Pa / (v A_ref).
-  A_ref is the mean, over the first :attr:`FFRModel.reference_length_mm`, of the healthy
-  reference area (``FFRModel.inlet_area="reference"``, the default: the QCA's fitted
-  reference, so a wrong first millimetre of the lumen does not move R) or of the lumen's
-  own area (``"lumen"``, the issue's first definition; docs/ffr.md has both measured).
+  A_ref is the mean, over the first :attr:`FFRModel.reference_length_mm`, of the lumen's
+  own (smoothed) area (``FFRModel.inlet_area="lumen"``, the default, as issue 47 defines
+  it) or of the QCA's fitted healthy reference area (``"reference"``: a wrong first
+  millimetre of the lumen does not move R; measured in docs/ffr.md, not better overall).
   The flow solves Pa - dP(Q) = R Q; FFR(s) = P(s) / Pa, the venous pressure taken as 0.
 - A tree: each segment a vessel leaving its parent at ``join_s_mm`` of the parent's arc
   length. The healthy flow splits at each bifurcation by the reference diameters to the
@@ -76,9 +76,9 @@ SPLIT_EXPONENT_RANGE = (2.0, 3.0)  # from area-preserving (2) to Murray (3)
 CLOSED_AREA_MM2 = 0.01
 #: The shortest segment (mm) beyond the proximal reference stretch.
 MIN_LENGTH_BEYOND_REFERENCE_MM = 2.0
-#: What A_ref averages over the proximal stretch (FFRModel.inlet_area): the QCA's fitted
-#: healthy reference area, or the lumen's own (smoothed) area.
-INLET_AREAS = ("reference", "lumen")
+#: What A_ref averages over the proximal stretch (FFRModel.inlet_area): the lumen's own
+#: (smoothed) area, or the QCA's fitted healthy reference area.
+INLET_AREAS = ("lumen", "reference")
 RESEARCH_NOTE = ("a model estimate for research (angiography-derived, pressure-driven 1D "
                  "model); not validated against a pressure wire here")
 
@@ -106,9 +106,9 @@ class FFRModel:
     viscosity_pa_s, density_kg_m3 : blood's.
     kt : the separation (expansion) loss coefficient.
     reference_length_mm : the proximal stretch whose mean area is A_ref.
-    inlet_area : what A_ref averages over that stretch (:data:`INLET_AREAS`):
-        "reference", the QCA's fitted healthy reference area (default), or "lumen", the
-        lumen's own area.
+    inlet_area : what A_ref averages over that stretch (:data:`INLET_AREAS`): "lumen",
+        the lumen's own area (default), or "reference", the QCA's fitted healthy
+        reference area.
     flow_band_m_s : the velocities of the band over the flow assumption.
     """
 
@@ -120,7 +120,7 @@ class FFRModel:
     kt: float = 1.52
     reference_length_mm: float = 3.0
     flow_band_m_s: tuple[float, float] = (0.25, 0.45)
-    inlet_area: str = "reference"
+    inlet_area: str = "lumen"
 
     def __post_init__(self) -> None:
         _in_range("aortic pressure", self.aortic_pressure_mmhg, *PRESSURE_RANGE_MMHG, "mmHg")
@@ -177,9 +177,9 @@ class Lumen:
         """The reference diameter (mm) at arc length ``s_mm`` (held beyond the ends)."""
         return float(np.sqrt(4.0 / np.pi * np.interp(s_mm, self.s_mm, self.reference_area_mm2)))
 
-    def inlet_area_mm2(self, length_mm: float, source: str = "reference") -> float:
+    def inlet_area_mm2(self, length_mm: float, source: str = "lumen") -> float:
         """A_ref: the mean over the first ``length_mm`` (at least the first point) of the
-        reference area (``source="reference"``) or of the lumen's area (``"lumen"``)."""
+        lumen's area (``source="lumen"``) or of the reference area (``"reference"``)."""
         near = self.s_mm <= self.s_mm[0] + length_mm
         values = self.reference_area_mm2 if source == "reference" else self.area_mm2
         return float(np.mean(values[near]))

@@ -231,11 +231,11 @@ def _wide_start_tube(wide_mm: float = 3.5, r0: float = 1.5) -> Lumen:
 
 
 def test_a_ref_from_the_reference_ignores_a_wrong_first_millimetre():
-    """R = Pa / (v A_ref): from the fitted reference (the default) A_ref is pi r0^2 however
-    wide the first 3 mm of the lumen are; from the lumen (inlet_area="lumen") it is their
-    mean area, 4 pi r0^2 here, a quarter of the resistance."""
+    """R = Pa / (v A_ref): from the lumen (the default, as the issue defines it) A_ref is
+    the mean area of the first 3 mm, 4 pi r0^2 here, a quarter of the resistance; from
+    the fitted reference (inlet_area="reference") it is pi r0^2 however wide they are."""
     lumen = _wide_start_tube()
-    assert FFRModel().inlet_area == "reference"
+    assert FFRModel().inlet_area == "lumen"
     for source, area_ref in (("reference", np.pi * 1.5**2), ("lumen", 4.0 * np.pi * 1.5**2)):
         result = tree_ffr([FFRVessel(lumen)], FFRModel(inlet_area=source))[0]
         resistance = 100.0 / (0.35 * area_ref)
@@ -247,7 +247,7 @@ def test_a_ref_from_the_reference_ignores_a_wrong_first_millimetre():
         assert q == pytest.approx(100.0 / (resistance + a[-1]), rel=1e-6)
     # on a healthy tube the two agree
     healthy = tube(40.0, 1.5)
-    assert tree_ffr([FFRVessel(healthy)], FFRModel(inlet_area="lumen"))[0].distal == \
+    assert tree_ffr([FFRVessel(healthy)], FFRModel(inlet_area="reference"))[0].distal == \
         pytest.approx(tree_ffr([FFRVessel(healthy)])[0].distal, rel=1e-12)
 
 
@@ -259,13 +259,13 @@ def test_a_ref_from_the_reference_averages_a_tapering_reference():
     lumen = Lumen(s, np.pi / 4.0 * (0.9 * d) ** 2, np.pi / 4.0 * d**2)
     first = np.arange(31) * 0.1
     expected = float(np.mean(np.pi / 4.0 * (3.2 - 0.02 * first) ** 2))
-    assert lumen.inlet_area_mm2(3.0) == pytest.approx(expected, rel=1e-12)
-    assert lumen.inlet_area_mm2(3.0, "lumen") == pytest.approx(0.81 * expected, rel=1e-12)
-    result = tree_ffr([FFRVessel(lumen)])[0]
+    assert lumen.inlet_area_mm2(3.0, "reference") == pytest.approx(expected, rel=1e-12)
+    assert lumen.inlet_area_mm2(3.0) == pytest.approx(0.81 * expected, rel=1e-12)
+    result = tree_ffr([FFRVessel(lumen)], FFRModel(inlet_area="reference"))[0]
     assert result.distal * 100.0 / result.flow_ml_s == pytest.approx(
         100.0 / (0.35 * expected), rel=1e-6)
 
 
 def test_an_unknown_inlet_area_is_refused():
-    with pytest.raises(FFRError, match="inlet area 'raw' is not one of reference, lumen"):
+    with pytest.raises(FFRError, match="inlet area 'raw' is not one of lumen, reference"):
         FFRModel(inlet_area="raw")
