@@ -53,6 +53,8 @@ __all__ = [
     "FFRResult",
     "FFRVessel",
     "Lumen",
+    "distal_ffr",
+    "vessel_coefficients",
     "loss_coefficients",
     "solve_networks",
     "tree_ffr",
@@ -562,3 +564,24 @@ def vessel_ffr(profile, draws: Sequence = (), model: FFRModel | None = None,
     vessel = FFRVessel(Lumen.from_profile(profile), draws=tuple(Lumen.from_profile(p)
                                                                 for p in draws), name=name)
     return tree_ffr([vessel], model)[0]
+
+
+def vessel_coefficients(lumen: Lumen, model: FFRModel | None = None
+                        ) -> tuple[float, float, float]:
+    """One vessel's three numbers (no tree): the distal resistance R = Pa / (v A_ref)
+    (mmHg s / mL, A_ref as ``model.inlet_area`` says), the viscous coefficient a
+    (mmHg s / mL) and the separation coefficient b (mmHg s^2 / mL^2) of the whole vessel,
+    so that Pa = (R + a) Q + b Q^2 (module docstring)."""
+    model = model or FFRModel()
+    a, b = loss_coefficients(lumen, model)
+    area_ref = lumen.inlet_area_mm2(model.reference_length_mm, model.inlet_area)
+    return model.aortic_pressure_mmhg / (model.velocity_m_s * area_ref), float(a[-1]), \
+        float(b[-1])
+
+
+def distal_ffr(resistance: float, a: float, b: float, aortic_pressure_mmhg: float) -> float:
+    """The closed form of one vessel's distal FFR: Q the positive root of
+    b Q^2 + (R + a) Q - Pa = 0, FFR = R Q / Pa (what svZeroDSolver solves for one vessel)."""
+    pa = aortic_pressure_mmhg
+    q = 2.0 * pa / ((a + resistance) + np.sqrt((a + resistance) ** 2 + 4.0 * b * pa))
+    return float(resistance * q / pa)

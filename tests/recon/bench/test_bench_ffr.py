@@ -95,6 +95,12 @@ def test_one_case_is_compared_with_the_model_on_its_true_lumen():
             [row], [])}, "overall": bench.figures([row], []), "chains": {}, "anatomy": {},
         "targets": bench.TARGETS, "failures": [], "wall_s": 1.0})
     assert "PASS" in text and "FAIL" not in text and "regular" in text
+    # the error's parts sum to it (closed form against the solver's FFR: to 1e-6), and the
+    # severe throat carries it: the separation part is the largest
+    parts = row["ffr_error_parts"]
+    assert sum(parts.values()) == pytest.approx(row["ffr_error"], abs=1e-6)
+    assert max(parts, key=lambda p: abs(parts[p])) == "separation"
+    assert "error parts, median |part|" in text
 
 
 def test_the_command_line_refuses_bad_ffr_options_without_output(tmp_path):
@@ -122,3 +128,35 @@ def test_the_demo_report_carries_the_ffr(tmp_path):
     assert len(block["s_mm"]) == len(block["ffr"]) == len(block["ci95_lo"])
     assert block["flow_band"]["velocity_m_s"] == [0.25, 0.45]
     assert report["branches"][0]["ffr"]["distal"] == block["distal"]
+
+
+def test_the_error_parts_split_the_error_by_shapley_values():
+    """Only R differs: all of the error is the resistance part. Only a differs (b = 0): the
+    viscous part is R / (R + a) - R / (R + a_true). Three differ: the parts sum to the
+    error, and each is its Shapley value (checked on one by hand)."""
+    pa = 100.0
+    true = (40.0, 2.0, 0.5)
+    only_r = bench.error_parts((30.0, 2.0, 0.5), true, pa)
+    err = bench.distal_ffr(30.0, 2.0, 0.5, pa) - bench.distal_ffr(*true, pa)
+    assert only_r["resistance"] == pytest.approx(err, rel=1e-12)
+    assert only_r["viscous"] == 0.0 and only_r["separation"] == 0.0
+    only_a = bench.error_parts((40.0, 5.0, 0.0), (40.0, 2.0, 0.0), pa)
+    assert only_a["viscous"] == pytest.approx(40.0 / 45.0 - 40.0 / 42.0, rel=1e-12)
+    rec = (30.0, 5.0, 2.0)
+    parts = bench.error_parts(rec, true, pa)
+    f = bench.distal_ffr
+    assert sum(parts.values()) == pytest.approx(f(*rec, pa) - f(*true, pa), rel=1e-12)
+    sep = (2 * (f(40.0, 2.0, 2.0, pa) - f(40.0, 2.0, 0.5, pa))  # b changed first
+           + 2 * (f(30.0, 5.0, 2.0, pa) - f(30.0, 5.0, 0.5, pa))  # b changed last
+           + (f(30.0, 2.0, 2.0, pa) - f(30.0, 2.0, 0.5, pa))  # b after R only
+           + (f(40.0, 5.0, 2.0, pa) - f(40.0, 5.0, 0.5, pa))) / 6  # b after a only
+    assert parts["separation"] == pytest.approx(sep, rel=1e-12)
+    # figures: the median |part| and which part is largest among errors above 0.03
+    rows = [_row(0.01, 0.9, True), _row(0.1, 0.7, True), _row(-0.05, 0.85, True)]
+    rows[0]["ffr_error_parts"] = {"resistance": 0.0, "viscous": 0.0, "separation": 0.01}
+    rows[1]["ffr_error_parts"] = {"resistance": 0.02, "viscous": 0.0, "separation": 0.08}
+    rows[2]["ffr_error_parts"] = {"resistance": -0.04, "viscous": 0.0, "separation": -0.01}
+    fig = bench.figures(rows, [])
+    assert fig["ffr_error_above_p90_target"] == 2
+    assert fig["ffr_error_largest_part"] == {"resistance": 1, "viscous": 0, "separation": 1}
+    assert fig["ffr_error_parts_abs_median"]["separation"] == pytest.approx(0.01)

@@ -269,3 +269,18 @@ def test_a_ref_from_the_reference_averages_a_tapering_reference():
 def test_an_unknown_inlet_area_is_refused():
     with pytest.raises(FFRError, match="inlet area 'raw' is not one of lumen, reference"):
         FFRModel(inlet_area="raw")
+
+
+def test_one_vessels_coefficients_give_the_solvers_ffr_in_closed_form():
+    """vessel_coefficients + distal_ffr (no solver) equal tree_ffr's distal FFR on a 65 %
+    cosine narrowing, for both sources of A_ref; R is Pa / (v pi r0^2)."""
+    from recon.lumen.ffr import distal_ffr, vessel_coefficients
+
+    lumen = cosine_narrowing(65.0)
+    for source in ("lumen", "reference"):
+        model = FFRModel(inlet_area=source)
+        r, a, b = vessel_coefficients(lumen, model)
+        assert r == pytest.approx(100.0 / (0.35 * np.pi * 1.5**2), rel=1e-9)
+        assert a > 0.0 and b > 0.0
+        assert distal_ffr(r, a, b, 100.0) == pytest.approx(
+            tree_ffr([FFRVessel(lumen)], model)[0].distal, abs=1e-8)
