@@ -16,6 +16,12 @@ compared with what that view shows:
 - **Local detours.** The same comparison in short windows: where the trace
   ran out along a side branch and came back, the projection stays near the
   trace but the trace's arc position jumps.
+- **Overlaps the other view cannot check.** Where a view's trace crosses or
+  touches another vessel's shadow, or bends too tightly for a straight-tube fit,
+  its profile fits are unreliable and the trace is bridged there from either side. Where the vessel also crosses that view's
+  epipolar lines, a sideways error of the bridge lies along them: it moves the 3D
+  point along the other view's ray, which that view cannot see. Such a stretch is
+  listed on the overlapped view, so its position is never taken silently.
 - **Bends one view cannot see.** A detour that runs along the epipolar lines
   is absorbed by triangulation into the other view's depth: the 3D curve then
   bends where its projection into that other view stays straight. A sharp
@@ -92,6 +98,16 @@ class ConsistencyThresholds:
         offset: triangulation absorbs it into the other view's depth, as a
         bend that view cannot see. 35 deg over 5 mm: a consistent phantom or
         real pair stays under ~25 deg; a 6 px bulge in a trace makes ~35 deg.
+    overlap_reliability : a trace point whose profile-fit reliability
+        (:attr:`~recon.types.Centerline2D.reliability`) is below this was bridged
+        (an overlapping or touching vessel): a clean tube's fit has 1. 0.05: at 0.3
+        two thirds more stretches are listed and hardly more bridges that went wrong
+        (docs/benchmarks.md, issue 45).
+    overlap_across_deg : such a point is unchecked by the other view where the
+        vessel crosses this view's epipolar lines at more than this angle: a
+        sideways error is then mostly along the epipolar line (sin 45 deg = 71 %).
+    overlap_min_mm : and over at least this much 3D arc (a single bridged fit is
+        noise).
     min_stretch_mm : flagged runs shorter than this (3D arc) are dropped as
         single-point noise; runs closer than it are merged.
     end_margin_mm : the first and last few mm of the 3D curve are not checked
@@ -108,6 +124,9 @@ class ConsistencyThresholds:
     detour_excess_px: float = 6.0
     bend_deg: float = 35.0
     bend_window_mm: float = 5.0
+    overlap_reliability: float = 0.05
+    overlap_across_deg: float = 45.0
+    overlap_min_mm: float = 1.0
     min_stretch_mm: float = 0.75
     end_margin_mm: float = 1.0
 
@@ -138,7 +157,7 @@ class Stretch:
     """A stretch of the 3D centerline that one view does not support.
 
     view : "a" or "b".
-    kind : "off_vessel", "arc_length", "detour" or "depth_bend".
+    kind : "off_vessel", "arc_length", "detour", "depth_bend" or "overlap".
     start_mm, end_mm : extent along the 3D centerline (mm from the proximal end).
     middle_px : (col, row) in that view of the stretch's middle (the projected
         3D point for off_vessel/arc_length, the trace point for detour).
@@ -185,6 +204,9 @@ class ViewConsistency:
         window) than its projection into the *other* view does: a bend only
         this view's trace shows.
     depth_bend : (M,) bool, ``hidden_bend_deg`` over the threshold.
+    overlap : (M,) bool, the trace bridged over another vessel's shadow where the
+        vessel crosses this view's epipolar lines (the other view cannot check it).
+    reliability : (M,) the trace's fit reliability at the nearest trace point.
     intervals : the click intervals of this view.
     """
 
@@ -199,6 +221,8 @@ class ViewConsistency:
     hidden_bend_deg: FloatArray | None = None
     depth_bend: BoolArray | None = None
     intervals: tuple[MarkInterval, ...] = field(default_factory=tuple)
+    overlap: BoolArray | None = None
+    reliability: FloatArray | None = None
 
     def __post_init__(self) -> None:
         m = len(self.offset_px)
@@ -206,11 +230,16 @@ class ViewConsistency:
             object.__setattr__(self, "hidden_bend_deg", np.zeros(m))
         if self.depth_bend is None:
             object.__setattr__(self, "depth_bend", np.zeros(m, dtype=bool))
+        if self.overlap is None:
+            object.__setattr__(self, "overlap", np.zeros(m, dtype=bool))
+        if self.reliability is None:
+            object.__setattr__(self, "reliability", np.ones(m))
 
     @property
     def flagged(self) -> BoolArray:
         """(M,) bool: any check failed at this point."""
-        return self.off_vessel | self.detour | self.arc_length | np.asarray(self.depth_bend)
+        return (self.off_vessel | self.detour | self.arc_length | np.asarray(self.depth_bend)
+                | np.asarray(self.overlap))
 
     @property
     def max_offset_px(self) -> float:
@@ -333,6 +362,24 @@ def _depth_bends(
     return hidden, _clean(hidden > th.bend_deg, s, th.min_stretch_mm)
 
 
+def _unchecked_overlaps(
+    X: FloatArray, s: FloatArray, geometry: ViewGeometry, other: ViewGeometry,
+    reliability: FloatArray, inner: BoolArray, th: ConsistencyThresholds,
+) -> BoolArray:
+    """(M,) bool: bridged points of a view's trace (``reliability`` (M,) below the
+    threshold) where the 3D curve (M, 3) crosses the view's epipolar lines at more than
+    the threshold angle, so that the ``other`` view cannot see a sideways error."""
+    p = geometry.project(X)
+    ray = X - other.source_world[None, :]
+    ray /= np.maximum(np.linalg.norm(ray, axis=1, keepdims=True), 1e-12)
+    epi = geometry.project(X + ray) - p  # the image of the other view's ray: the epipolar line
+    tan = np.gradient(p, axis=0)
+    cos = np.abs(np.einsum("ij,ij->i", epi, tan)) / np.maximum(
+        np.linalg.norm(epi, axis=1) * np.linalg.norm(tan, axis=1), 1e-12)
+    across = cos < np.cos(np.radians(th.overlap_across_deg))
+    return _clean(inner & across & (reliability < th.overlap_reliability), s, th.overlap_min_mm)
+
+
 # ------------------------------------------------------------------ one view
 def check_view(
     view: str,
@@ -415,10 +462,12 @@ def check_view(
             diff = iv.traced_px - iv.projected_px
             if abs(diff) > max(th.arc_length_pct / 100.0 * iv.projected_px, th.arc_length_min_px):
                 arc_bad[i:j + 1] = True
+    reliability = (np.ones(m) if trace.reliability is None
+                   else np.interp(t_pos, s_trace, np.asarray(trace.reliability, dtype=float)))
     return ViewConsistency(
         view=view, projected_px=p, offset_px=offset, trace_s_px=t_pos,
         vesselness_ratio=ratio, off_vessel=off, detour=detour, arc_length=arc_bad,
-        intervals=tuple(intervals),
+        intervals=tuple(intervals), reliability=reliability,
     )
 
 
@@ -473,6 +522,18 @@ def _stretches(vc: ViewConsistency, s: FloatArray, trace: Centerline2D) -> list[
         out.append(Stretch(vc.view, "depth_bend", float(s[i]), float(s[j]),
                            tuple(float(x) for x in vc.projected_px[worst]),
                            float(vc.hidden_bend_deg[worst]), why))
+    for i, j in _runs(np.asarray(vc.overlap)):
+        if (vc.off_vessel[i:j + 1].any() or vc.detour[i:j + 1].any()
+                or np.asarray(vc.depth_bend)[i:j + 1].any()):
+            continue  # the place is already listed
+        mid = (i + j) // 2
+        why = (f"view {name}'s trace is bridged between {s[i]:.1f} and {s[j]:.1f} mm (no "
+               f"clean single-tube fit there: another vessel's shadow or a tight bend), "
+               f"across the epipolar lines, so view {other} cannot check its position; "
+               f"check the trace there, or add a waypoint in {name} on the vessel's centre")
+        out.append(Stretch(vc.view, "overlap", float(s[i]), float(s[j]),
+                           tuple(float(x) for x in vc.projected_px[mid]),
+                           float(np.min(np.asarray(vc.reliability)[i:j + 1])), why))
     return out
 
 
@@ -507,8 +568,11 @@ def check_consistency(
     # a bend hidden in view A is shown only by B's trace: it is B's stretch, and vice versa
     bend_b = _depth_bends(X, s, va.projected_px, th)
     bend_a = _depth_bends(X, s, vb.projected_px, th)
-    va = replace(va, hidden_bend_deg=bend_a[0], depth_bend=bend_a[1])
-    vb = replace(vb, hidden_bend_deg=bend_b[0], depth_bend=bend_b[1])
+    inner = (s >= s[0] + th.end_margin_mm) & (s <= s[-1] - th.end_margin_mm)
+    over_a = _unchecked_overlaps(X, s, view_a, view_b, va.reliability, inner, th)
+    over_b = _unchecked_overlaps(X, s, view_b, view_a, vb.reliability, inner, th)
+    va = replace(va, hidden_bend_deg=bend_a[0], depth_bend=bend_a[1], overlap=over_a)
+    vb = replace(vb, hidden_bend_deg=bend_b[0], depth_bend=bend_b[1], overlap=over_b)
     stretches = _stretches(va, s, trace_a) + _stretches(vb, s, trace_b)
     stretches.sort(key=lambda st: (st.view, st.start_mm))
     return ConsistencyResult(a=va, b=vb, s_mm=np.asarray(s, dtype=float),

@@ -20,7 +20,7 @@ from recon.correspond.consistency import (
     check_consistency,
     nearest_on_polyline,
 )
-from recon.geometry import ViewGeometry
+from recon.geometry import ViewGeometry, epipolar_lines
 from recon.types import Centerline2D, Centerline3D, arclength
 
 VIEW_A = ViewGeometry(0.0, 0.0, 1000.0, 750.0, (0.3, 0.3), 512, 512)
@@ -266,3 +266,67 @@ def test_after_triangulation_a_detour_in_b_is_flagged_at_the_right_place(height_
         assert "only view B's trace bends there" in st.reason
         # its 2D place is on the bulge in B
         assert np.min(np.linalg.norm(detour - np.array(st.middle_px), axis=1)) < 3.0
+
+
+def _straight_pair(direction: np.ndarray, bridged: tuple[float, float]):
+    """A straight 40 mm vessel along a world ``direction``, exact traces in both views,
+    view A's fits bridged (reliability 0.01) over the arc fractions ``bridged``."""
+    s = np.arange(0.0, 40.0, 0.25)
+    X = (s - 20.0)[:, None] * direction[None, :]
+    tang = np.tile(direction, (len(s), 1))
+    m = len(s)
+    c3 = Centerline3D(X_world=X, s_mm=s, tangents=tang, radius_a_mm=np.ones(m),
+                      radius_b_mm=np.ones(m), X_raw_world=X, points_a_px=VIEW_A.project(X),
+                      points_b_px=VIEW_B.project(X))
+    pa, pb = VIEW_A.project(X), VIEW_B.project(X)
+    ta, tb = trace(pa, pa[[0, -1]]), trace(pb, pb[[0, -1]])
+    u = arclength(ta.points_px) / arclength(ta.points_px)[-1]
+    rel = np.where((u > bridged[0]) & (u < bridged[1]), 0.01, 1.0)
+    ta = Centerline2D(points_px=ta.points_px, radius_px=ta.radius_px,
+                      brightness=ta.brightness, clicks_px=ta.clicks_px, reliability=rel)
+    return c3, pa, pb, ta, tb
+
+
+def _angle_to_epipolar_deg(pa: np.ndarray, pb: np.ndarray) -> float:
+    """Median angle between the vessel in A and A's epipolar lines (from the
+    fundamental matrix, independently of the code under test)."""
+    lines = epipolar_lines(pb, VIEW_B, VIEW_A)
+    tan = np.gradient(pa, axis=0)
+    tan /= np.linalg.norm(tan, axis=1, keepdims=True)
+    along = np.column_stack([lines[:, 1], -lines[:, 0]])
+    return float(np.median(np.degrees(np.arccos(np.abs(np.sum(tan * along, axis=1))))))
+
+
+def test_a_bridged_overlap_across_the_epipolar_lines_is_listed_on_its_view() -> None:
+    # along world z the vessel crosses A's epipolar lines (~70 deg): a sideways error of
+    # A's bridge would move the 3D point along B's ray, which B cannot see
+    c3, pa, pb, ta, tb = _straight_pair(np.array([0.0, 0.0, 1.0]), (0.40, 0.55))
+    assert _angle_to_epipolar_deg(pa, pb) > 60.0
+    result = check_consistency(c3, VIEW_A, VIEW_B, ta, tb, ridge_response([pa]),
+                               ridge_response([pb]))
+    overlaps = [st for st in result.stretches if st.kind == "overlap"]
+    assert [st.view for st in overlaps] == ["a"], [st.reason for st in result.stretches]
+    st = overlaps[0]
+    assert 0.40 * 40 - 1.0 < st.start_mm and st.end_mm < 0.55 * 40 + 1.0
+    assert st.end_mm - st.start_mm > 4.0
+    assert st.value == pytest.approx(0.01)
+    assert "view B cannot check" in st.reason
+    assert result.a.flagged.any() and not result.b.flagged.any()
+    assert json.loads(json.dumps(result.to_dict()))["stretches"][0]["kind"] == "overlap"
+
+
+def test_a_bridged_overlap_along_the_epipolar_lines_is_left_to_the_other_view() -> None:
+    # along world x the vessel runs near A's epipolar lines (~20 deg): B sees a sideways
+    # error there (as an offset), so the bridge alone is not listed
+    c3, pa, pb, ta, tb = _straight_pair(np.array([1.0, 0.0, 0.0]), (0.40, 0.55))
+    assert _angle_to_epipolar_deg(pa, pb) < 30.0
+    result = check_consistency(c3, VIEW_A, VIEW_B, ta, tb, ridge_response([pa]),
+                               ridge_response([pb]))
+    assert result.ok, [s.reason for s in result.stretches]
+
+
+def test_a_single_bridged_fit_is_not_an_overlap() -> None:
+    c3, pa, pb, ta, tb = _straight_pair(np.array([0.0, 0.0, 1.0]), (0.500, 0.505))
+    result = check_consistency(c3, VIEW_A, VIEW_B, ta, tb, ridge_response([pa]),
+                               ridge_response([pb]))
+    assert result.ok, [s.reason for s in result.stretches]
