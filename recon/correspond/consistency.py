@@ -18,10 +18,11 @@ compared with what that view shows:
   trace but the trace's arc position jumps.
 - **Overlaps the other view cannot check.** Where a view's trace crosses or
   touches another vessel's shadow, or bends too tightly for a straight-tube fit,
-  its profile fits are unreliable and the trace is bridged there from either side. Where the vessel also crosses that view's
-  epipolar lines, a sideways error of the bridge lies along them: it moves the 3D
-  point along the other view's ray, which that view cannot see. Such a stretch is
-  listed on the overlapped view, so its position is never taken silently.
+  its profile fits are unreliable and the trace is bridged there from either
+  side. Where the vessel also crosses that view's epipolar lines, a sideways
+  error of the bridge lies along them: it moves the 3D point along the other
+  view's ray, which that view cannot see. Such a stretch is listed on the
+  overlapped view, so its position is never taken silently.
 - **Bends one view cannot see.** A detour that runs along the epipolar lines
   is absorbed by triangulation into the other view's depth: the 3D curve then
   bends where its projection into that other view stays straight. A sharp
