@@ -46,7 +46,12 @@ the disease threshold delta been a lesion (no % stenosis floor), to show what th
 floor buys; ``lesion_set_stable_completed`` is ``lesion_set_stable`` over the cases
 whose runs all ran (a refused jittered trace leaves no lesion set to compare). The
 borderline narrowings (below the floor, their interval reaching it) are listed per
-run in ``borderline_sets`` and are not lesions.
+run in ``borderline_sets`` and are not lesions. ``lesion_set_kept_or_borderline`` is
+a looser figure, not the target's: the share of cases in which no lesion of any run
+is missing from another without a word
+(:func:`recon.lumen.lesions.lesions_kept_or_borderline`: a lesion of one run may be a
+borderline narrowing at the same place in another; a failed run is not kept); it shows
+what the borderline list buys.
 """
 
 from __future__ import annotations
@@ -70,7 +75,7 @@ from recon.bench.common import (
     scale_free_rms_mm,
     varied_rows,
 )
-from recon.lumen.lesions import lesion_sets_equal
+from recon.lumen.lesions import lesion_sets_equal, lesions_kept_or_borderline
 from recon.pipeline import Reconstruction, ReconstructionOptions, reconstruct_pair
 from recon.synth import PhantomCase, PhantomTruth, make_phantom
 
@@ -446,6 +451,11 @@ def _jitter_case(case: PhantomCase, options: ReconstructionOptions, n: int,
         out[key] = bool(all_ran and base is not None
                         and all(lesion_sets_equal(sets[0][which], other[which], rule)
                                 for other in sets[1:]))
+    out["lesion_set_kept_or_borderline"] = bool(
+        all_ran and base is not None
+        and all(lesions_kept_or_borderline(x["lesions"], y["lesions"], x["borderline"],
+                                           y["borderline"])
+                for i, x in enumerate(sets) for y in sets[i + 1:]))
     return out
 
 
@@ -465,6 +475,7 @@ def _stability_figures(cases: list[dict]) -> dict:
         "site_spread_mm_median": median(c["site_spread_mm"] for c in cases),
         "site_spread_mm_max": percentile([c["site_spread_mm"] for c in cases], 100),
         **{key: _fraction(cases, key) for key, _, _ in LESION_SET_FIGURES},
+        "lesion_set_kept_or_borderline": _fraction(cases, "lesion_set_kept_or_borderline"),
         # the same over the cases whose runs all ran (a refused trace has no lesion set)
         "lesion_set_stable_completed": _fraction(
             [c for c in cases if c["failed_runs"] == 0 and not c["base_failed"]],

@@ -64,6 +64,7 @@ __all__ = [
     "LesionReport",
     "lesion_report",
     "lesion_sets_equal",
+    "lesions_kept_or_borderline",
     "ostium_zone_end_s_mm",
     "LESION_CI_KEYS",
 ]
@@ -334,6 +335,24 @@ def lesion_sets_equal(a: Sequence[dict], b: Sequence[dict], rule: str = "overlap
         if not same:
             return False
     return True
+
+
+def lesions_kept_or_borderline(a: Sequence[dict], b: Sequence[dict],
+                               borderline_a: Sequence[dict] = (),
+                               borderline_b: Sequence[dict] = ()) -> bool:
+    """Whether no lesion of one run is missing from the other without a word: every lesion
+    of ``a`` overlaps (extents) a lesion or a borderline narrowing of ``b``, and every
+    lesion of ``b`` one of ``a``. Looser than :func:`lesion_sets_equal`: a narrowing that
+    is a lesion in one run and, below the floor with its interval reaching it, a borderline
+    narrowing in the other counts as kept (it is shown in both, on either side of the
+    floor). Dicts as :func:`lesion_sets_equal` reads them."""
+
+    def found(x: dict, others: Sequence[dict]) -> bool:
+        return any(min(x["end_s_mm"], y["end_s_mm"]) > max(x["start_s_mm"], y["start_s_mm"])
+                   for y in others)
+
+    return (all(found(x, [*b, *borderline_b]) for x in a)
+            and all(found(y, [*a, *borderline_a]) for y in b))
 
 
 def ostium_zone_end_s_mm(

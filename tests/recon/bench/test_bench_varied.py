@@ -127,7 +127,8 @@ def test_bench_reconstruct_varied_keys_and_stability(tiny_suite):
     assert st["jitter_px"] == 2.0 and len(st["cases"]) == 2
     for key in ("stable_fraction", "mld_spread_mm_median", "ds_spread_pct_median",
                 "site_spread_mm_median", "lesion_set_stable", "lesion_set_stable_delta",
-                "lesion_set_stable_completed", "lesion_set_stable_unmerged"):
+                "lesion_set_stable_completed", "lesion_set_stable_unmerged",
+                "lesion_set_kept_or_borderline"):
         assert key in st["overall"]
     assert "click stability" in reconstruct.format_table(result)
     # issue 46: each case's lesion sets, base run first, and whether they are all the same

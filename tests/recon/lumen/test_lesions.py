@@ -290,3 +290,18 @@ def test_lesion_sets_compare_by_overlap_and_the_old_rule_by_mld():
     assert not lesion_sets_equal(a, c)
     with pytest.raises(ValueError, match="rule"):
         lesion_sets_equal(a, b, rule="near")
+
+
+def test_a_lesion_that_another_run_lists_as_borderline_is_kept_but_not_the_same_set():
+    from recon.lumen.lesions import lesions_kept_or_borderline
+
+    main = {"mld_s_mm": 40.0, "start_s_mm": 36.0, "end_s_mm": 44.0}
+    near_floor = {"mld_s_mm": 74.0, "start_s_mm": 72.0, "end_s_mm": 76.0}
+    a, b = [main, near_floor], [main]
+    border_b = [{"mld_s_mm": 73.5, "start_s_mm": 72.5, "end_s_mm": 75.0}]
+    assert not lesion_sets_equal(a, b)
+    assert lesions_kept_or_borderline(a, b, [], border_b)
+    assert lesions_kept_or_borderline(b, a, border_b, [])  # symmetric
+    assert not lesions_kept_or_borderline(a, b)  # vanished without a word
+    elsewhere = [{"mld_s_mm": 60.0, "start_s_mm": 59.0, "end_s_mm": 61.0}]
+    assert not lesions_kept_or_borderline(a, b, [], elsewhere)
