@@ -135,6 +135,8 @@ class ViewerApp(MarkEditing, RunCommands):
         # Reconstruct's (memory GB, CPU s), as --max-memory-gb / --max-cpu-s; None: default
         self.limits: tuple[float | None, float | None] = (None, None)
         self.layout = LAYOUTS[0]  # what the page shows: one of scene.LAYOUTS
+        self.zoom: tuple[str, tuple[float, float], int] | None = None  # (view, px, factor)
+        self.zoom_pending: int | None = None  # a zoom waiting for the place to look at
         self.model: ModelNodes | None = None
         self.lesion: dict[str, float] | None = None  # lesion ends set by hand (mm), if any
         self.pair_warning: str | None = None  # views too similar to fix depth
@@ -180,13 +182,32 @@ class ViewerApp(MarkEditing, RunCommands):
             "3D model" if self.model is not None else "Angiograms", client=client))
 
     def _framing(self, layout: str | None = None) -> scene.Framing:
+        if self.zoom is not None and (layout or self.layout) != "3D model":
+            return scene.zoom_framing(self.views, *self.zoom)
         return scene.layout_framing(layout or self.layout, self.views,
                                     None if self.model is None else self.model.position)
+
+    def zoom_at_next_click(self, factor: int) -> None:
+        """The next click on an image frames the page on that place, ``factor`` times
+        larger than in "Angiograms" (:data:`viewer_app.scene.ZOOMS`); it places no mark."""
+        if factor not in scene.ZOOMS:
+            raise ValueError(f"zoom must be one of {scene.ZOOMS}, got {factor!r}")
+        self.zoom_pending = factor
+        self.panels.show_zoom(f"Click the place to look at: it is shown x{factor} "
+                              "(no mark is placed). **Fit** shows both images again.")
+
+    def fit_images(self) -> None:
+        """Back from a zoom: the current layout's framing."""
+        self.zoom, self.zoom_pending = None, None
+        self.panels.show_zoom("")
+        self.cameras.frame_all()
 
     def set_layout(self, layout: str, client: object | None = None) -> None:
         """Show "Angiograms" (straight on both images), "Angiograms + 3D" or "3D model"
         (the model alone, the camera orbiting it)."""
         with self._lock:
+            self.zoom, self.zoom_pending = None, None  # a layout is shown whole
+            self.panels.show_zoom("")
             fr = self._framing(layout)
             self.layout = layout
             scene.set_visibility(self.views, None if self.model is None else self.model.root,
@@ -268,6 +289,7 @@ class ViewerApp(MarkEditing, RunCommands):
                   seeds: Seeds | None, seeds_path: str | None) -> None:
         with self._lock:
             self.views = {"a": View("a", angio_a, name_a), "b": View("b", angio_b, name_b)}
+            self.zoom, self.zoom_pending = None, None
             self.state = MarkState(angio_a.geometry, angio_b.geometry, snapper=self._snap,
                                    header_check_px=LARGE_HEADER_ERROR_PX)
             self.reconstruction, self.run_angios = None, None
@@ -471,6 +493,14 @@ class ViewerApp(MarkEditing, RunCommands):
             self.clicks_handled += 1
 
     def _click(self, view: str, col: float, row: float, client: object | None) -> Mark | None:
+        if self.zoom_pending is not None:  # the place to zoom on, not a mark
+            self.zoom, self.zoom_pending = (view, (float(col), float(row)),
+                                            self.zoom_pending), None
+            self.panels.show_zoom(f"Showing {view.upper()} x{self.zoom[2]} around "
+                                  f"({col:.0f}, {row:.0f}); clicks place marks again. "
+                                  "**Fit** shows both images.")
+            self.cameras.frame_all()
+            return None
         if self.catheter.active:  # two clicks across the catheter, not marks
             self.catheter.click(self.views[view], col, row, self.intensity[view], client)
             return None

@@ -64,7 +64,8 @@ class CatheterTool:
             return False
         self.pending, self.clicks = (view, french), []
         self._note(f"Waiting: click once on each edge of the {french:g} F catheter in "
-                   f"**{view.upper()}**, across it.")
+                   f"**{view.upper()}**, across it (to see it larger first: **Zoom** x4 in "
+                   "the Reconstruct folder, then click the catheter).")
         self.scene.remove_by_name(f"/over_{view}/catheter")
         return True
 

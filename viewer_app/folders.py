@@ -22,7 +22,7 @@ from recon.io.outputs import REPORT_PDF_NAME, SR_NAME
 from recon.trace.intensity import INTENSITY_CHOICES
 from viewer_app.commands import PageCommands
 from viewer_app.marks import MODE_LABELS, MODES
-from viewer_app.scene import LAYOUTS
+from viewer_app.scene import LAYOUTS, ZOOMS
 
 __all__ = [
     "GEOMETRY_WORDS",
@@ -147,6 +147,8 @@ class ResultsPanel:
     progress: viser.GuiProgressBarHandle
     stale: viser.GuiMarkdownHandle  # "out of date" when the marks changed since; hidden
     layout: viser.GuiDropdownHandle  # Angiograms / Angiograms + 3D / 3D model
+    zoom: viser.GuiButtonGroupHandle  # Fit / x2 / x4 / x8 at the next click on an image
+    zoom_note: viser.GuiMarkdownHandle  # what the zoom waits for or shows; hidden if none
     ffr_colour: viser.GuiCheckboxHandle  # the model coloured by FFR (else by diameter)
     ffr_key: viser.GuiImageHandle  # the FFR colour key, shown while the model has them
     branch: viser.GuiDropdownHandle  # a tree's branch shown (the Segment dropdown's twin)
@@ -453,6 +455,20 @@ def results_folder(gui: viser.GuiApi, app: PageCommands, refreshing: Refreshing)
                 return
             app.guard("Show", event.client, lambda: app.set_layout(str(layout.value)))
 
+        zoom = gui.add_button_group(
+            "Zoom", ["Fit", *(f"x{z}" for z in ZOOMS)],
+            hint="x2, x4, x8: the next click on an image shows that place magnified (it "
+                 "places no mark), e.g. the guiding catheter's edges; Fit: both images whole")
+        zoom_note = gui.add_markdown("", visible=False)
+
+        @zoom.on_click
+        def _(event: viser.GuiEvent) -> None:
+            if event.client is None:
+                return
+            choice = str(zoom.value)
+            app.guard("Zoom", event.client, lambda: app.fit_images() if choice == "Fit"
+                      else app.zoom_at_next_click(int(choice[1:])))
+
         ffr_colour = gui.add_checkbox(
             "Colour the model by FFR", False, visible=False,
             hint="FFR: a model estimate for research, not validated against a pressure "
@@ -502,6 +518,7 @@ def results_folder(gui: viser.GuiApi, app: PageCommands, refreshing: Refreshing)
         with gui.add_folder("Details (engineering)", expand_by_default=False):
             markdown = gui.add_markdown("")
     return ResultsPanel(reconstruct=reconstruct, progress=progress, stale=stale, layout=layout,
+                        zoom=zoom, zoom_note=zoom_note,
                         branch=branch, branch_note=branch_note, warnings=warnings,
                         clinical=clinical,
                         plot=plot, lesion_start=lesion_start,

@@ -184,6 +184,11 @@ class Panels:
             if self.results.layout.value != layout:
                 self.results.layout.value = layout
 
+    def show_zoom(self, text: str) -> None:
+        """The zoom's note under the Show dropdown ("" hides it)."""
+        self.results.zoom_note.content = text
+        self.results.zoom_note.visible = bool(text)
+
     def show_calibration(self, res: CalibrationResult) -> None:
         self.calibrate.markdown.content = calibration_markdown(res)
 

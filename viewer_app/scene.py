@@ -71,6 +71,8 @@ __all__ = [
     "camera_distance",
     "camera_rotated_deg",
     "layout_framing",
+    "zoom_framing",
+    "ZOOMS",
     "set_visibility",
     "overlay_name",
     "ray_to_px",
@@ -602,6 +604,21 @@ def layout_framing(layout: str, views: Mapping[str, View],
     top = float(model_position[1]) - MODEL_SIZE / 2
     centre = np.array([images_centre[0], (top + half_h) / 2, 0.0])
     return Framing(True, True, centre, half_w, (half_h - top) / 2 + 0.04, True)
+
+
+#: The zoom factors offered: the image's magnification against the "Angiograms" layout.
+ZOOMS: tuple[int, ...] = (2, 4, 8)
+
+
+def zoom_framing(views: Mapping[str, View], key: str, point_px: tuple[float, float],
+                 factor: float) -> Framing:
+    """Straight on image ``key`` ("a" or "b"), magnified ``factor`` times against the
+    "Angiograms" layout and centred on its pixel ``point_px`` (col, row): a close look at
+    one place of one image (the guiding catheter's edges, a mark), the other image aside."""
+    both = layout_framing("Angiograms", views, None)
+    v = views[key]
+    centre = v.position + v.local_from_px(np.asarray(point_px, dtype=float)[None], z=0.0)[0]
+    return Framing(True, False, centre, both.half_w / factor, both.half_h / factor, True)
 
 
 def camera_distance(fr: Framing, aspect: float, fov_rad: float = CAMERA_FOV_RAD) -> float:
