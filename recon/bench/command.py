@@ -64,7 +64,7 @@ def add_bench_parser(sub) -> None:
         "worker processes (the engine of `coronary3d batch`)",
     )
     p.add_argument("--tracer", choices=("2d", "3d"), default="2d",
-                   help="reconstruct, regular and varied suites: the pipeline's tracer")
+                   help="reconstruct (every suite): the pipeline's tracer")
 
 
 def bench_call(args: argparse.Namespace) -> tuple[Callable[..., dict], Callable[[dict], str],
@@ -87,12 +87,13 @@ def bench_call(args: argparse.Namespace) -> tuple[Callable[..., dict], Callable[
             args.name == "reconstruct" and args.suite == "regular"))):
         raise ValueError("--workers N (N >= 1) is for bench reconstruct (regular suite), "
                          "intervals and calibration-modes")
-    if args.tracer != "2d" and (args.name != "reconstruct" or tree_suite):
-        raise ValueError("--tracer is for bench reconstruct (regular and varied suites)")
+    if args.tracer != "2d" and args.name != "reconstruct":
+        raise ValueError("--tracer is for bench reconstruct")
     if tree_suite:  # the tree suites' end-to-end bench has its own module
         module = importlib.import_module("recon.bench.tree")
         return (module.run_tree, module.format_tree,
-                {"cases": args.cases, "seed": args.seed, "suite": args.suite})
+                {"cases": args.cases, "seed": args.seed, "suite": args.suite,
+                 "tracer": args.tracer})
     module = importlib.import_module(f"recon.bench.{args.name.replace('-', '_')}")
     kwargs = {"cases": args.cases, "seed": args.seed}
     if args.name in suites:

@@ -126,13 +126,14 @@ def _preset_name(preset: str | PhantomPreset) -> str:
 
 
 def _case(job: tuple) -> dict:
-    preset, seed, lesion, chain, stenosis_pct = job
+    preset, seed, lesion, chain, stenosis_pct, *more = job
+    tracer = more[0] if more else "2d"
     tc = make_tree_case(preset, seed, lesion, stenosis_pct=stenosis_pct, chain=chain)
     from recon.bench.common import case_angiograms
 
     a, b = case_angiograms(tc.case)
     t0 = time.perf_counter()
-    rec = reconstruct_tree(a, b, tc.seeds)
+    rec = reconstruct_tree(a, b, tc.seeds, ReconstructionOptions(tracer=tracer))
     wall_ms = (time.perf_counter() - t0) * 1000.0
     truth = tc.case.truth
     segments = []
@@ -238,22 +239,25 @@ def _case_or_failure(job: tuple) -> tuple[dict | None, dict | None]:
     try:
         return _case(job), None
     except (CoronaryError, ValueError) as err:
-        preset, seed, lesion, chain, pct = job
+        preset, seed, lesion, chain, pct, *_ = job
         return None, {"preset": _preset_name(preset), "chain": chain, "seed": seed,
                       "lesion": lesion, "stenosis_pct": pct,
                       "error": " ".join(str(err).split())}
 
 
-def run_tree(cases: int | None = None, seed: int = 0, suite: str = "tree") -> dict:
+def run_tree(cases: int | None = None, seed: int = 0, suite: str = "tree",
+             tracer: str = "2d") -> dict:
     """Run a tree suite (module docstring); the figures, the rows and the failures.
+    ``tracer``: the pipeline's tracer ("2d" or "3d", :data:`recon.pipeline.TRACER_CHOICES`).
 
     The cases run in up to two worker processes (:func:`recon.bench.common.parallel_map`).
     """
-    jobs = tree_jobs(CASES if cases is None else cases, seed, suite)
+    jobs = [(*job, tracer) for job in tree_jobs(CASES if cases is None else cases, seed, suite)]
     outcomes = parallel_map(_case_or_failure, jobs)
     result = summarise([r for r, _ in outcomes if r is not None],
                        [f for _, f in outcomes if f is not None])
     result["suite"] = suite
+    result["tracer"] = tracer
     return result
 
 
