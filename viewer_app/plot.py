@@ -142,13 +142,16 @@ def _area_chart(img: NDArray[np.uint8], s: FloatArray, area: FloatArray,
 
 BRANCH_BAND = (222, 222, 222)  # a side branch's ostium widens the silhouette
 OVERLAP_BAND = (255, 243, 190)  # one view overlapped: the other view's width is used
+BORDERLINE_BAND = (255, 236, 214)  # a narrowing below the lesion floor, its interval reaching it
 
 
 def _flagged_stretches(rec: Reconstruction) -> list[tuple[tuple[float, float],
                                                           tuple[int, int, int], str]]:
     """The stretches the chart shades, ((start, end) mm, colour, label): side-branch ostia
-    (:func:`viewer_app.results.branch_stretches`) and overlapped stretches of either view
-    (``Centerline3D.overlap_stretches_mm``). The measured curve is drawn over them."""
+    (:func:`viewer_app.results.branch_stretches`), overlapped stretches of either view
+    (``Centerline3D.overlap_stretches_mm``) and borderline narrowings (below the lesion
+    floor, their 95 % interval reaching it: ``LesionReport.borderline``). The measured
+    curve is drawn over them."""
     from viewer_app.results import branch_stretches
 
     out = []
@@ -160,6 +163,10 @@ def _flagged_stretches(rec: Reconstruction) -> list[tuple[tuple[float, float],
     if c is not None and getattr(rec, "seeds", None) is not None:
         out += [((b["start_mm"], b["end_mm"]), BRANCH_BAND, "branch")
                 for b in branch_stretches(rec)]
+    for b in tuple(getattr(getattr(rec, "lesions", None), "borderline", ()) or ()):
+        n = b.narrowing
+        out.append(((n.start_s_mm, n.end_s_mm), BORDERLINE_BAND,
+                    f"borderline {n.diameter_stenosis_pct:.0f} %"))
     return out
 
 

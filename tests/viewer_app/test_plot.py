@@ -98,3 +98,21 @@ def test_band_titles_side_by_side_go_on_rows_of_their_own() -> None:
 
     assert dark_rows(top + 3, top + 14) > 20  # "A overlapped" on the first row
     assert dark_rows(top + 15, top + 26) > 20  # "B overlapped" on the second
+
+
+def test_a_borderline_narrowing_is_shaded_and_titled() -> None:
+    """Issue 46: a narrowing below the lesion floor whose interval reaches it is shown on
+    the chart (a band over its extent, titled with its %DS), not only in the summary."""
+    from viewer_app.plot import BORDERLINE_BAND
+
+    rec = _rec(smooth=True)
+    plain = profile_plot(rec)
+    assert not np.any(np.all(plain == BORDERLINE_BAND, axis=-1))
+    narrowing = SimpleNamespace(start_s_mm=38.0, end_s_mm=44.0, diameter_stenosis_pct=22.4)
+    rec.lesions = SimpleNamespace(borderline=(SimpleNamespace(narrowing=narrowing),))
+    img = profile_plot(rec)
+    left, right = 56, 14
+    band = np.flatnonzero(np.any(np.all(img == BORDERLINE_BAND, axis=-1), axis=0))
+    assert band.size
+    assert abs(band.min() - (left + 38.0 / 50.0 * (640 - left - right))) <= 1.5
+    assert abs(band.max() - (left + 44.0 / 50.0 * (640 - left - right))) <= 1.5
