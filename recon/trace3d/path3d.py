@@ -218,11 +218,17 @@ def _layered_path(n: int, edges: tuple[NDArray[np.int64], NDArray[np.int64], Flo
     na, nb = len(gates_a) + 1, len(gates_b) + 1
     n_layers = na * nb
     src, snk = n_layers * n, n_layers * n + 1
-    rows, cols = [], []
-    for layer in range(n_layers):
-        rows += [r0 + layer * n, c0 + layer * n]
-        cols += [c0 + layer * n, r0 + layer * n]
-    weights = [np.tile(np.concatenate([w0, w0]), n_layers)]
+    # one layer's symmetric graph, then its copies as a block diagonal built from its CSR
+    # arrays (the copies' rows follow each other: no sort of the whole graph)
+    one = sparse.csr_matrix((np.concatenate([w0, w0]), (np.concatenate([r0, c0]),
+                                                         np.concatenate([c0, r0]))),
+                            shape=(n, n))
+    layers = np.arange(n_layers)
+    indptr = np.concatenate([(one.indptr[:-1][None, :] + one.nnz * layers[:, None]).ravel(),
+                             np.full(3, n_layers * one.nnz)])
+    blocks = sparse.csr_matrix((np.tile(one.data, n_layers),
+                                (one.indices[None, :] + n * layers[:, None]).ravel(), indptr),
+                               shape=(snk + 1, snk + 1))
     hop_r, hop_c = [np.full(int(starts.sum()), src)], [np.nonzero(starts)[0]]
     hop_r.append((n_layers - 1) * n + np.nonzero(ends)[0])
     hop_c.append(np.full(int(ends.sum()), snk))
@@ -238,10 +244,8 @@ def _layered_path(n: int, edges: tuple[NDArray[np.int64], NDArray[np.int64], Flo
                 hop_r.append(here + at)
                 hop_c.append((ia * nb + ib + 1) * n + at)
     hr, hc = np.concatenate(hop_r), np.concatenate(hop_c)
-    r = np.concatenate([*rows, hr])
-    c = np.concatenate([*cols, hc])
-    w = np.concatenate([*weights, np.full(len(hr), 1e-9)])
-    graph = sparse.csr_matrix((w, (r, c)), shape=(snk + 1, snk + 1))
+    graph = blocks + sparse.csr_matrix((np.full(len(hr), 1e-9), (hr, hc)),
+                                       shape=(snk + 1, snk + 1))
     dist, pred = dijkstra(graph, directed=True, indices=src, return_predecessors=True)
     if not np.isfinite(dist[snk]):
         raise _NoPath
