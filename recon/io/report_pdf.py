@@ -8,17 +8,17 @@ MLD, % diameter stenosis, lesion length, each with its 95 % interval, and its
 lesions, and its FFR with its interval); the bifurcations (Medina class, angles, the three
 segments' % diameter stenosis); the best next view; the warnings.
 
-Then one page per segment: its diameter profile (measured, smoothed, the reference,
-the diameter's 95 % band) with bands for each lesion (numbered), a narrowing not
-confirmed, the zones at the clicked ends or the ostium, where a side branch leaves
-it and where one view's radius was replaced because another vessel overlaps it; its FFR
-(:mod:`recon.lumen.ffr`, a model estimate for research): the distal value with its 95 %
-interval and the band over the assumed flow, said not to be a confidence interval, and
-the pullback chart (FFR along the segment on the profile's distance scale, its 95 %
-interval shaded, the flow band dashed, a line at 0.80, the lesions), or "FFR not
-computed" with the warning's reason; its figures with their 95 % intervals; its lesions,
-each with MLD, % diameter stenosis, length and site, and their intervals; and whether the
-most severe lesion stands out (:mod:`recon.lumen.lesions`).
+Then one page per segment: its diameter profile (measured, smoothed, the reference, the
+diameter's 95 % band) with bands for each lesion (numbered), a borderline narrowing, a
+narrowing not confirmed, the zones at the clicked ends or the ostium, where a side
+branch leaves it and where one view's radius was replaced because another vessel
+overlaps it; its FFR (:mod:`recon.lumen.ffr`, a model estimate for research): the distal
+value with its 95 % interval and the band over the assumed flow, said not to be a
+confidence interval, and the pullback chart (FFR along the segment on the profile's
+distance scale, its 95 % interval shaded, the flow band dashed, a line at 0.80, the
+lesions), or "FFR not computed" with the warning's reason; its figures with their 95 %
+intervals; its lesions, each with MLD, % diameter stenosis, length and site, and their
+intervals; and whether the most severe lesion stands out (:mod:`recon.lumen.lesions`).
 
 No patient name, ID or date unless ``identify`` (then read from the DICOM headers).
 :func:`write_report_pdf` is the page's call; the command line's ``--report`` renders
@@ -37,6 +37,7 @@ from numpy.typing import NDArray
 
 from recon import __version__
 from recon.lumen.ffr import RESEARCH_NOTE
+from recon.lumen.measure import MIN_LESION_DS_PCT
 
 if TYPE_CHECKING:
     from recon.lumen.ffr import FFRResult
@@ -378,6 +379,12 @@ def _draw_profile(ax, result, rec: Reconstruction, xlim: tuple[float, float]) ->
     for k, n in enumerate(rec.lesions.unsupported):
         ax.axvspan(n.start_s_mm, n.end_s_mm, facecolor="none", edgecolor="gray", hatch="..",
                    lw=0, label="narrowing not confirmed" if k == 0 else "_")
+    for k, b in enumerate(rec.lesions.borderline):
+        n = b.narrowing
+        ax.axvspan(n.start_s_mm, n.end_s_mm, color="papayawhip", zorder=0,
+                   label=f"borderline narrowing (below {MIN_LESION_DS_PCT:.0f} %, its 95 % "
+                         "interval reaching it)"
+                   if k == 0 else "_")
     for k, les in enumerate(rec.lesions.lesions):
         n = les.narrowing
         ax.axvspan(n.start_s_mm, n.end_s_mm, color="mistyrose", zorder=0,

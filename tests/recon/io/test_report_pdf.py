@@ -278,3 +278,35 @@ def test_a_report_page_renders_with_the_pullback_drawn(tree_out):
     rows = np.flatnonzero(navy.any(axis=1)) / h  # from the top
     in_chart = (rows > 1 - 0.605) & (rows < 1 - 0.475)
     assert in_chart.sum() >= 5  # the curve (FFR and its 'distal' label) drawn in the chart
+
+
+def test_a_borderline_narrowing_has_its_band_on_the_diameter_chart(case):
+    """Issue 46: a narrowing below the lesion floor whose interval reaches it is shaded on
+    the segment page's diameter chart, over its extent, with its own legend entry."""
+    from dataclasses import replace
+
+    from matplotlib.patches import Rectangle
+
+    from recon.io.report_pdf import segment_figure
+    from recon.lumen.lesions import Lesion
+    from recon.lumen.measure import Narrowing
+
+    rec, _, _ = case
+    # a 22 % narrowing at 30-38 mm (interval 17-30 %), listed as borderline here
+    n = Narrowing(peak_s_mm=34.0, start_s_mm=30.0, end_s_mm=38.0, length_mm=8.0, mld_mm=2.0,
+                  mld_s_mm=34.0, reference_diameter_mm=2.56, diameter_stenosis_pct=22.0,
+                  area_stenosis_pct=39.2, mla_mm2=3.14, reference_area_mm2=5.15, zone="",
+                  supported=True)
+    les = Lesion(1, n, {"diameter_stenosis_pct": (17.0, 30.0)})
+    shown = replace(rec)  # a copy whose (cached) lesion report lists it
+    shown.__dict__["lesions"] = replace(rec.lesions, borderline=(les,))
+    (ax,) = [a for a in segment_figure(shown, shown).axes if a.get_title() == "Diameter profile"]
+    bands = [p for p in ax.patches if p.get_label().startswith("borderline narrowing")]
+    assert len(bands) == 1
+    x = np.asarray(bands[0].get_xy())[:, 0] if not isinstance(bands[0], Rectangle) else \
+        np.array([bands[0].get_x(), bands[0].get_x() + bands[0].get_width()])
+    assert np.isclose(x.min(), les.narrowing.start_s_mm)
+    assert np.isclose(x.max(), les.narrowing.end_s_mm)
+    (plain_ax,) = [a for a in segment_figure(rec, rec).axes
+                   if a.get_title() == "Diameter profile"]
+    assert not [p for p in plain_ax.patches if p.get_label().startswith("borderline")]
