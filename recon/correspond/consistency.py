@@ -365,12 +365,12 @@ def _depth_bends(
 
 def _unchecked_overlaps(
     X: FloatArray, s: FloatArray, geometry: ViewGeometry, other: ViewGeometry,
-    reliability: FloatArray, inner: BoolArray, th: ConsistencyThresholds,
+    vc: ViewConsistency, inner: BoolArray, th: ConsistencyThresholds,
 ) -> BoolArray:
-    """(M,) bool: bridged points of a view's trace (``reliability`` (M,) below the
+    """(M,) bool: bridged points of a view's trace (``vc.reliability`` below the
     threshold) where the 3D curve (M, 3) crosses the view's epipolar lines at more than
     the threshold angle, so that the ``other`` view cannot see a sideways error."""
-    p = geometry.project(X)
+    p = vc.projected_px
     ray = X - other.source_world[None, :]
     ray /= np.maximum(np.linalg.norm(ray, axis=1, keepdims=True), 1e-12)
     epi = geometry.project(X + ray) - p  # the image of the other view's ray: the epipolar line
@@ -378,7 +378,8 @@ def _unchecked_overlaps(
     cos = np.abs(np.einsum("ij,ij->i", epi, tan)) / np.maximum(
         np.linalg.norm(epi, axis=1) * np.linalg.norm(tan, axis=1), 1e-12)
     across = cos < np.cos(np.radians(th.overlap_across_deg))
-    return _clean(inner & across & (reliability < th.overlap_reliability), s, th.overlap_min_mm)
+    return _clean(inner & across & (vc.reliability < th.overlap_reliability), s,
+                  th.overlap_min_mm)
 
 
 # ------------------------------------------------------------------ one view
@@ -570,8 +571,8 @@ def check_consistency(
     bend_b = _depth_bends(X, s, va.projected_px, th)
     bend_a = _depth_bends(X, s, vb.projected_px, th)
     inner = (s >= s[0] + th.end_margin_mm) & (s <= s[-1] - th.end_margin_mm)
-    over_a = _unchecked_overlaps(X, s, view_a, view_b, va.reliability, inner, th)
-    over_b = _unchecked_overlaps(X, s, view_b, view_a, vb.reliability, inner, th)
+    over_a = _unchecked_overlaps(X, s, view_a, view_b, va, inner, th)
+    over_b = _unchecked_overlaps(X, s, view_b, view_a, vb, inner, th)
     va = replace(va, hidden_bend_deg=bend_a[0], depth_bend=bend_a[1], overlap=over_a)
     vb = replace(vb, hidden_bend_deg=bend_b[0], depth_bend=bend_b[1], overlap=over_b)
     stretches = _stretches(va, s, trace_a) + _stretches(vb, s, trace_b)

@@ -5,10 +5,13 @@ screenshots into test-artifacts/viewer/, and the page's scene read through viser
 
 from __future__ import annotations
 
+import contextlib
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from viewer_app import ViewerApp
 
@@ -195,3 +198,23 @@ def failed(app: ViewerApp) -> bool:
     return any(level == "error" for level, _, _ in app.notifications)
 
 
+
+
+@contextlib.contextmanager
+def demo_page(demo_case: dict[str, Path], tmp_path: Path, artifacts_dir: Path,
+              seeds: bool = True) -> Iterator[tuple[ViewerApp, Browser]]:
+    """A viewer on the demo pair (with its seeds, or none), ready, and a Chromium page
+    open on it; both closed afterwards."""
+    sync_api = pytest.importorskip("playwright.sync_api", reason="playwright is not installed")
+    app = ViewerApp(str(demo_case["a"]), str(demo_case["b"]),
+                    str(demo_case["seeds"]) if seeds else None, port=0,
+                    autosave_path=tmp_path / "autosave.json")
+    app.wait_ready()
+    with sync_api.sync_playwright() as pw:
+        b = Browser(pw, tmp_path / "profile", artifacts_dir)
+        try:
+            b.open(app)
+            yield app, b
+        finally:
+            b.close()
+            app.stop()

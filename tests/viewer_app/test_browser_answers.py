@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from browser_page import BOX_JS, CHROMIUM, Browser, failed, wait_for
+from browser_page import BOX_JS, CHROMIUM, Browser, demo_page, failed, wait_for
 
 from recon.geometry import ViewGeometry
 from viewer_app import ViewerApp
@@ -418,59 +418,49 @@ def test_a_mark_is_dragged_and_deleted_and_the_camera_stays_on_the_angiograms(
     model still turns the page to the model."""
     from viewer_app import scene
 
-    sync_api = pytest.importorskip("playwright.sync_api", reason="playwright is not installed")
-    app = ViewerApp(str(demo_case["a"]), str(demo_case["b"]), str(demo_case["seeds"]),
-                    port=0, autosave_path=tmp_path / "autosave.json")
-    app.wait_ready()
-    with sync_api.sync_playwright() as pw:
-        b = Browser(pw, tmp_path / "profile", artifacts_dir)
-        try:
-            b.open(app)
-            client = next(iter(app.server.get_clients().values()))
-            n_marks = len(app.state.marks)
-            for view in ("a", "b"):
-                wp = [m for m in app.state.marks if m.view == view and m.kind == "waypoint"]
-                mark, target = wp[0], np.asarray(wp[1].point_px)
-                # half-way to the next waypoint along the vessel
-                goal = (np.asarray(mark.point_px) + target) / 2
-                _drag(b, b.screen_xy(view, *mark.point_px), b.screen_xy(view, *goal))
-                wait_for(lambda m=mark: app.state.mark_by_id(m.id).point_px != m.point_px,
-                         10, f"the {view.upper()} mark to move")
-                wait_for(lambda: app._drag is None, 10, "the drag to end")
-                moved = app.state.mark_by_id(mark.id)
-                assert np.hypot(*(np.asarray(moved.point_px) - goal)) < 8.0, (moved, goal)
-                assert moved.snap_distance_px is not None  # snapped where it was let go
-                b.page.wait_for_timeout(500)
-                assert len(app.state.marks) == n_marks  # the drag placed no new mark
-                assert app.layout == "Angiograms" and scene.camera_rotated_deg(client) < 0.5
-                b.shot(f"answers_12_mark_dragged_{view}.png")
-                _press(b, "Undo")
-                wait_for(lambda m=mark: app.state.mark_by_id(m.id).point_px == m.point_px,
-                         10, "the undo of the drag")
-                # a drag on the image away from every mark: nothing moves, nor the camera
-                before = list(app.state.marks)
-                _drag(b, b.screen_xy(view, 60.0, 60.0), b.screen_xy(view, 200.0, 120.0))
-                b.page.wait_for_timeout(800)
-                assert app.state.marks == before
-                assert app.layout == "Angiograms" and scene.camera_rotated_deg(client) < 0.5
-            # delete the selected mark, then undo
-            mark = next(m for m in app.state.marks if m.view == "b" and m.kind == "waypoint")
-            b.choose("Selected mark", f"B {app.state.label(mark)} #{mark.id}")
-            wait_for(lambda: app.state.selected_id == mark.id, 10, "the selection")
-            _press(b, "Delete selected mark")
-            wait_for(lambda: app.state.mark_by_id(mark.id) is None, 10, "the deletion")
-            b.shot("answers_13_mark_deleted.png")
+    with demo_page(demo_case, tmp_path, artifacts_dir) as (app, b):
+        client = next(iter(app.server.get_clients().values()))
+        n_marks = len(app.state.marks)
+        for view in ("a", "b"):
+            wp = [m for m in app.state.marks if m.view == view and m.kind == "waypoint"]
+            mark, target = wp[0], np.asarray(wp[1].point_px)
+            # half-way to the next waypoint along the vessel
+            goal = (np.asarray(mark.point_px) + target) / 2
+            _drag(b, b.screen_xy(view, *mark.point_px), b.screen_xy(view, *goal))
+            wait_for(lambda m=mark: app.state.mark_by_id(m.id).point_px != m.point_px,
+                     10, f"the {view.upper()} mark to move")
+            wait_for(lambda: app._drag is None, 10, "the drag to end")
+            moved = app.state.mark_by_id(mark.id)
+            assert np.hypot(*(np.asarray(moved.point_px) - goal)) < 8.0, (moved, goal)
+            assert moved.snap_distance_px is not None  # snapped where it was let go
+            b.page.wait_for_timeout(500)
+            assert len(app.state.marks) == n_marks  # the drag placed no new mark
+            assert app.layout == "Angiograms" and scene.camera_rotated_deg(client) < 0.5
+            b.shot(f"answers_12_mark_dragged_{view}.png")
             _press(b, "Undo")
-            wait_for(lambda: app.state.mark_by_id(mark.id) == mark, 10, "the undo")
-            # the model still turns with a drag on it
-            assert _reconstructed(b, app, len(app.notifications))
-            b.page.wait_for_timeout(1500)
-            box = b.page.evaluate(BOX_JS, "/model/mesh")
-            cx, cy = (box[0] + box[2]) / 2, (box[1] + box[3]) / 2
-            _drag(b, (cx, cy), (cx + 160, cy + 40))
-            wait_for(lambda: app.layout == "3D model", 10, "the page to turn to the model")
+            wait_for(lambda m=mark: app.state.mark_by_id(m.id).point_px == m.point_px,
+                     10, "the undo of the drag")
+            # a drag on the image away from every mark: nothing moves, nor the camera
+            before = list(app.state.marks)
+            _drag(b, b.screen_xy(view, 60.0, 60.0), b.screen_xy(view, 200.0, 120.0))
             b.page.wait_for_timeout(800)
-            b.shot("answers_14_model_rotated.png")
-        finally:
-            b.close()
-            app.stop()
+            assert app.state.marks == before
+            assert app.layout == "Angiograms" and scene.camera_rotated_deg(client) < 0.5
+        # delete the selected mark, then undo
+        mark = next(m for m in app.state.marks if m.view == "b" and m.kind == "waypoint")
+        b.choose("Selected mark", f"B {app.state.label(mark)} #{mark.id}")
+        wait_for(lambda: app.state.selected_id == mark.id, 10, "the selection")
+        _press(b, "Delete selected mark")
+        wait_for(lambda: app.state.mark_by_id(mark.id) is None, 10, "the deletion")
+        b.shot("answers_13_mark_deleted.png")
+        _press(b, "Undo")
+        wait_for(lambda: app.state.mark_by_id(mark.id) == mark, 10, "the undo")
+        # the model still turns with a drag on it
+        assert _reconstructed(b, app, len(app.notifications))
+        b.page.wait_for_timeout(1500)
+        box = b.page.evaluate(BOX_JS, "/model/mesh")
+        cx, cy = (box[0] + box[2]) / 2, (box[1] + box[3]) / 2
+        _drag(b, (cx, cy), (cx + 160, cy + 40))
+        wait_for(lambda: app.layout == "3D model", 10, "the page to turn to the model")
+        b.page.wait_for_timeout(800)
+        b.shot("answers_14_model_rotated.png")

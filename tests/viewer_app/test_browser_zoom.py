@@ -9,9 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from browser_page import CHROMIUM, Browser, wait_for  # tests/viewer_app/browser_page.py
-
-from viewer_app import ViewerApp
+from browser_page import CHROMIUM, Browser, demo_page, wait_for  # tests/viewer_app/browser_page.py
 
 pytestmark = pytest.mark.browser
 
@@ -27,43 +25,33 @@ def _px_per_image_px(b: Browser, view: str, col: float, row: float) -> float:
 def test_zoom_shows_one_place_larger_and_fit_shows_both_images(
     demo_case: dict[str, Path], tmp_path: Path, artifacts_dir: Path
 ) -> None:
-    sync_api = pytest.importorskip("playwright.sync_api", reason="playwright is not installed")
-    app = ViewerApp(str(demo_case["a"]), str(demo_case["b"]), None, port=0,
-                    autosave_path=tmp_path / "autosave.json")
-    app.wait_ready()
     place = (170.0, 440.0)  # the hairpin bend near the demo vessel's distal end in A
-    with sync_api.sync_playwright() as pw:
-        b = Browser(pw, tmp_path / "profile", artifacts_dir)
-        try:
-            b.open(app)
-            n_marks = len(app.state.marks)
-            scale_fit = _px_per_image_px(b, "a", *place)
-            b.page.get_by_role("button", name="x4", exact=True).click()
-            wait_for(lambda: app.zoom_pending == 4, 10, "the zoom to wait for its place")
-            assert "Click the place to look at" in app.panels.results.zoom_note.content
-            mark, notes = b.click("a", *place)
-            assert mark is None and len(app.state.marks) == n_marks, notes  # no mark
-            assert app.zoom is not None and app.zoom[0] == "a" and app.zoom[2] == 4
-            assert np.allclose(app.zoom[1], place, atol=1.5)
-            b.page.wait_for_timeout(2000)  # the camera moves
-            wait_for(lambda: _px_per_image_px(b, "a", *place) > 3.5 * scale_fit, 10,
-                     "the image to be shown four times larger")
-            # the place is in the middle of the canvas, and a click there places a mark
-            x, y = b.screen_xy("a", *place)
-            box = b.page.locator("canvas").first.bounding_box()
-            assert abs(x - (box["x"] + box["width"] / 2)) < 0.1 * box["width"]
-            assert abs(y - (box["y"] + box["height"] / 2)) < 0.1 * box["height"]
-            b.shot("zoom_1_x4_on_a.png")
-            mark, notes = b.click("a", place[0] + 3.0, place[1] - 2.0)
-            assert mark is not None and mark.view == "a", notes
-            assert np.hypot(mark.raw_px[0] - place[0] - 3.0, mark.raw_px[1] - place[1] + 2.0) < 1.0
-            b.page.get_by_role("button", name="Fit", exact=True).click()
-            wait_for(lambda: app.zoom is None, 10, "Fit")
-            b.page.wait_for_timeout(2000)
-            wait_for(lambda: abs(_px_per_image_px(b, "a", *place) / scale_fit - 1.0) < 0.05, 10,
-                     "both images whole again")
-            assert not app.panels.results.zoom_note.visible
-            b.shot("zoom_2_fit.png")
-        finally:
-            b.close()
-            app.stop()
+    with demo_page(demo_case, tmp_path, artifacts_dir, seeds=False) as (app, b):
+        n_marks = len(app.state.marks)
+        scale_fit = _px_per_image_px(b, "a", *place)
+        b.page.get_by_role("button", name="x4", exact=True).click()
+        wait_for(lambda: app.zoom_pending == 4, 10, "the zoom to wait for its place")
+        assert "Click the place to look at" in app.panels.results.zoom_note.content
+        mark, notes = b.click("a", *place)
+        assert mark is None and len(app.state.marks) == n_marks, notes  # no mark
+        assert app.zoom is not None and app.zoom[0] == "a" and app.zoom[2] == 4
+        assert np.allclose(app.zoom[1], place, atol=1.5)
+        b.page.wait_for_timeout(2000)  # the camera moves
+        wait_for(lambda: _px_per_image_px(b, "a", *place) > 3.5 * scale_fit, 10,
+                 "the image to be shown four times larger")
+        # the place is in the middle of the canvas, and a click there places a mark
+        x, y = b.screen_xy("a", *place)
+        box = b.page.locator("canvas").first.bounding_box()
+        assert abs(x - (box["x"] + box["width"] / 2)) < 0.1 * box["width"]
+        assert abs(y - (box["y"] + box["height"] / 2)) < 0.1 * box["height"]
+        b.shot("zoom_1_x4_on_a.png")
+        mark, notes = b.click("a", place[0] + 3.0, place[1] - 2.0)
+        assert mark is not None and mark.view == "a", notes
+        assert np.hypot(mark.raw_px[0] - place[0] - 3.0, mark.raw_px[1] - place[1] + 2.0) < 1.0
+        b.page.get_by_role("button", name="Fit", exact=True).click()
+        wait_for(lambda: app.zoom is None, 10, "Fit")
+        b.page.wait_for_timeout(2000)
+        wait_for(lambda: abs(_px_per_image_px(b, "a", *place) / scale_fit - 1.0) < 0.05, 10,
+                 "both images whole again")
+        assert not app.panels.results.zoom_note.visible
+        b.shot("zoom_2_fit.png")
